@@ -1,0 +1,105 @@
+#pragma once
+// Scene description: the plain, validated data a scene file turns into (SPEC §5). No JSON types appear here; the
+// schema, the loader and the documentation generator live in scene_schema.hpp / scene_loader.cpp.
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace octocut::engine {
+
+/// An axis-aligned box in metres (after `object.scale` for mesh-relative boxes: boxes are always in metres).
+struct SceneBox {
+  std::array<double, 3> min{};  ///< lower corner, m (3)
+  std::array<double, 3> max{};  ///< upper corner, m (3)
+};
+
+/// One keyframe of a handle's rigid motion. Linear interpolation between keyframes, held after the last.
+struct HandleKeyframe {
+  double t = 0.0;                             ///< time, s
+  std::array<double, 3> translation{};        ///< translation of the box, m (3)
+  std::array<double, 3> rotation_deg{};       ///< XYZ Euler angles about the box centre, degrees (3)
+};
+
+/// A handle: a rest-space box whose DOFs follow a keyframed rigid motion; fixed when it has no keyframes.
+struct Handle {
+  SceneBox box;
+  std::vector<HandleKeyframe> keyframes;  ///< sorted by t (the loader rejects unsorted lists)
+};
+
+/// A static refinement region: every leaf overlapping `box` is refined to at least `level`.
+struct RefineRegion {
+  SceneBox box;
+  int level = 0;
+};
+
+struct Material {
+  double young_modulus = 1e5;      ///< E, Pa
+  double poisson_ratio = 0.3;      ///< nu, dimensionless, [0, 0.5)
+  double density = 1000.0;         ///< rho, kg/m^3
+  double rayleigh_mass = 0.0;      ///< alpha, 1/s
+  double rayleigh_stiffness = 0.0; ///< beta, s
+};
+
+struct OctreeSettings {
+  bool has_root = false;            ///< true when `octree.root` is given
+  std::array<double, 3> root_min{}; ///< root cube lower corner, m (3)
+  double root_size = 0.0;           ///< root cube edge, m
+  int base_level = 3;               ///< uniform preprocessing level
+  int max_level = 8;                ///< bound on all refinement
+  bool uniform = false;             ///< refine uniformly (no adaptivity), used by uniform_cut-style scenes
+  std::vector<RefineRegion> refine; ///< static refinement regions
+};
+
+struct ObjectSettings {
+  bool surface_is_box = true;  ///< true: `surface` is {"box": …}; false: a mesh path
+  SceneBox surface_box;        ///< when surface_is_box, m
+  std::string surface_path;    ///< absolute path (resolved against the scene file) when !surface_is_box
+  double scale = 1.0;          ///< multiplies mesh coordinates to get metres
+  Material material;
+  OctreeSettings octree;
+  double material_graph_cell_size = 0.001;  ///< m (used from the geometry issue on)
+  std::vector<Handle> handles;
+};
+
+struct SolverSettings {
+  std::string mode = "dynamic";            ///< "dynamic" | "static"
+  double dt = 1e-3;                        ///< s
+  std::array<double, 3> gravity{0.0, 0.0, -9.81};  ///< m/s^2 (3)
+  std::string linear_solver = "pcg";       ///< "cholmod" | "pcg"
+  double tolerance = 1e-6;                 ///< relative residual
+  int max_iterations = 200;                ///< per linear solve (pcg) / per static solve (Newton)
+  int threads = 0;                         ///< 0 = auto (hardware concurrency)
+  double max_speed = 100.0;                ///< m/s; a guard: faster DOFs roll the step back
+};
+
+struct Probe {
+  std::string name;
+  std::array<double, 3> point{};  ///< rest-space point, m (3)
+};
+
+struct RenderSettings {
+  bool enabled = false;
+};
+
+struct OutputSettings {
+  bool frames = false;
+  bool surface_final = false;
+  int surface_every = 0;
+};
+
+/// A fully validated scene with defaults filled in.
+struct Scene {
+  std::string file;        ///< the scene file path as given
+  std::string name;
+  double duration = 1.0;   ///< s
+  std::uint64_t seed = 0;
+  SolverSettings solver;
+  ObjectSettings object;
+  std::vector<Probe> probes;
+  RenderSettings render;
+  OutputSettings output;
+};
+
+}  // namespace octocut::engine

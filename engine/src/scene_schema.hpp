@@ -1,0 +1,67 @@
+#pragma once
+// Private to the engine: the scene schema as data (one Entry per key), the validator that checks a parsed document
+// against it and fills in defaults, and the message helpers shared with the loader.
+#include <cstddef>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace octocut::engine::schema {
+
+/// The JSON shape an entry accepts.
+enum class Type {
+  number,        ///< a finite JSON number
+  integer,       ///< a JSON integer (a float with an integral value is accepted too)
+  boolean,       ///< true or false
+  string,        ///< any string
+  enumeration,   ///< one of the strings in `choices`
+  number_array,  ///< exactly `length` finite numbers
+  object,        ///< an object whose keys are `children`
+  object_array,  ///< an array of objects whose keys are `children`
+  box_or_path,   ///< a mesh path (string), or an object whose keys are `children`
+};
+
+/// Bounds on a number or integer. Each bound is optional and inclusive unless marked exclusive.
+struct Range {
+  std::optional<double> min;
+  bool min_exclusive = false;
+  std::optional<double> max;
+  bool max_exclusive = false;
+};
+
+/// One key of the scene format, with everything the validator and the documentation need.
+struct Entry {
+  std::string key;  ///< key inside the parent object (empty for the document)
+  Type type = Type::object;
+  std::string doc;                              ///< one-sentence description, with units
+  bool required = false;                        ///< absence is an error
+  std::optional<nlohmann::json> default_value;  ///< inserted when the key is absent; none: the key stays absent
+  std::string default_doc;                      ///< default column text when the loader computes the default
+  Range range;                                  ///< number, integer, and each element of a number_array
+  std::vector<std::string> choices;             ///< enumeration
+  std::size_t length = 0;                       ///< number_array
+  std::vector<Entry> children;  ///< object keys; keys of each object_array item; box_or_path's object form
+};
+
+/// Returns the schema of a whole scene document: an object entry with an empty key.
+const Entry& scene_schema();
+
+/// Checks `value`, found at JSON pointer `pointer` of scene file `file`, against `entry` and its children, and
+/// inserts the default of every absent key that has one. Throws SceneError at the first violation.
+void validate(nlohmann::json& value, const Entry& entry, const std::string& pointer, const std::string& file);
+
+/// Throws SceneError with the message `<file>: <pointer>: <what>` (`<file>: <what>` for the document itself).
+[[noreturn]] void fail(const std::string& file, const std::string& pointer, const std::string& what);
+
+/// Returns the JSON pointer of key `key` of the value at `parent`, escaping '~' as "~0" and '/' as "~1".
+std::string join_pointer(const std::string& parent, const std::string& key);
+
+/// Returns the JSON pointer of element `index` of the array at `parent`.
+std::string join_pointer(const std::string& parent, std::size_t index);
+
+/// Formats a number for messages and documentation: integral values below 1e6 without a fraction, everything else
+/// in the shortest form that reads back to the same double ("0.001", "1e+12", "inf").
+std::string format_number(double value);
+
+}  // namespace octocut::engine::schema

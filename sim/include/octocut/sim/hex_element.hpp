@@ -1,0 +1,33 @@
+#pragma once
+// The corotational trilinear hexahedron (SPEC §3).
+#include <Eigen/Core>
+
+#include "octocut/sim/types.hpp"
+
+namespace octocut::sim {
+
+using Mat24 = Eigen::Matrix<double, 24, 24>;
+using Vec24 = Eigen::Matrix<double, 24, 1>;
+
+/// Stiffness of the unit cube [0,1]^3 with Young's modulus 1 and Poisson ratio nu, 2x2x2 Gauss quadrature
+/// (24 x 24, N/m per unit E). A cube of edge h and modulus E has stiffness E * h * unit_stiffness. Corner k has the
+/// bits (k&1, k>>1&1, k>>2&1) along x, y, z; DOF 3k+d is corner k's coordinate d.
+Mat24 unit_hex_stiffness(double nu);
+
+/// Deformation gradient at the centre of a cube of edge h (m) whose 8 corners are at x (m, 3 x 8 columns).
+Mat3 hex_center_gradient(const Eigen::Matrix<double, 3, 8>& x, double h);
+
+/// Rotation of the polar decomposition F = R S, robust to inverted and degenerate F: SVD with the sign correction
+/// of Irving et al. 2004, so that det R = +1 always.
+Mat3 polar_rotation(const Mat3& F);
+
+/// Corotated displacement R^T (x - x_c) - (X - X_c) of the 8 corners relative to their centroids (m, 24).
+Vec24 corotated_displacement(const Mat3& R, const Vec24& x, const Vec24& X);
+
+/// Restoring force -R K (R^T x - X) of one element (N, 24), with K = E h K_unit scaled by occupancy (K given).
+Vec24 corotated_force(const Mat24& K, const Mat3& R, const Vec24& x, const Vec24& X);
+
+/// The corotated stiffness R K R^T (24 x 24).
+Mat24 corotated_stiffness(const Mat24& K, const Mat3& R);
+
+}  // namespace octocut::sim

@@ -1,0 +1,45 @@
+#pragma once
+// Linear solvers behind one interface (SPEC §3): analyze_pattern once per sparsity pattern, factorize per matrix,
+// solve per right-hand side.
+#include <memory>
+#include <string>
+
+#include "octocut/sim/types.hpp"
+
+namespace octocut::sim {
+
+/// What one solve did.
+struct SolveInfo {
+  bool ok = false;         ///< converged (pcg) or factor valid (cholmod)
+  int iterations = 0;      ///< pcg iterations (0 for a direct solve)
+  double residual = 0.0;   ///< final relative residual |b - A x| / |b|
+  bool refactorized = false;  ///< a numeric factorisation ran during this call
+};
+
+/// A solver for symmetric positive definite systems A x = b (A given with both triangles stored).
+class LinearSolver {
+ public:
+  virtual ~LinearSolver() = default;
+  /// Symbolic analysis of A's pattern. Call again whenever the pattern changes.
+  virtual void analyze_pattern(const SpMat& A) = 0;
+  /// Makes the solver ready for the numeric values of A (same pattern as analysed). Returns false when A is not
+  /// positive definite.
+  virtual bool factorize(const SpMat& A) = 0;
+  /// Solves A x = b for the A last given to factorize(). x holds the warm start on entry (pcg).
+  virtual SolveInfo solve(const VecX& b, VecX& x) = 0;
+  [[nodiscard]] virtual std::string name() const = 0;
+};
+
+struct LinearSolverOptions {
+  double tolerance = 1e-6;     ///< pcg: relative residual target
+  int max_iterations = 200;    ///< pcg: iteration cap
+  /// pcg: refactorise the lagged Cholesky preconditioner when a solve needs more iterations than this.
+  int refactor_iterations = 8;
+  std::string preconditioner = "cholesky";  ///< pcg: "cholesky" (lagged factor) | "jacobi"
+};
+
+/// Creates "cholmod" (supernodal LL^T, exact every call) or "pcg" (warm-started conjugate gradients preconditioned
+/// by a lagged CHOLMOD factorisation that is refreshed only when convergence slows). Throws on an unknown name.
+std::unique_ptr<LinearSolver> make_linear_solver(const std::string& name, const LinearSolverOptions& options);
+
+}  // namespace octocut::sim

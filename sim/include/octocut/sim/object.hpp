@@ -1,0 +1,138 @@
+#pragma once
+// The object model (MuJoCo's mjModel in spirit): octree, occupancy, DOF map, masses and handles. It changes only by
+// producing a new revision (refinement, and from the cutting issue on, cuts); the simulation state lives apart in
+// SimState.
+#include <array>
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include "octocut/sim/dof_map.hpp"
+#include "octocut/sim/hex_element.hpp"
+#include "octocut/sim/material.hpp"
+#include "octocut/sim/octree.hpp"
+
+namespace octocut::sim {
+
+/// Isotropic linear elastic material with Rayleigh damping.
+struct MaterialParams {
+  double young_modulus = 1e5;      ///< E, Pa
+  double poisson_ratio = 0.3;      ///< nu, dimensionless
+  double density = 1000.0;         ///< rho, kg/m^3
+  double rayleigh_mass = 0.0;      ///< alpha, 1/s
+  double rayleigh_stiffness = 0.0; ///< beta, s
+};
+
+/// One keyframe of a handle's rigid motion.
+struct HandleKeyframe {
+  double t = 0.0;                       ///< s
+  Vec3 translation = Vec3::Zero();      ///< m
+  Vec3 rotation_deg = Vec3::Zero();     ///< XYZ Euler angles about the box centre, degrees
+};
+
+/// A rest-space box whose DOFs follow a keyframed rigid motion (fixed without keyframes).
+struct HandleSpec {
+  Box3 box;                               ///< rest-space box, m
+  std::vector<HandleKeyframe> keyframes;  ///< sorted by t
+
+  /// Where rest point X (m) is at time t (s): piecewise-linear translation and Euler angles, held at the ends.
+  [[nodiscard]] Vec3 position(const Vec3& X, double t) const;
+};
+
+/// A static refinement region: leaves overlapping `box` with positive volume are refined to `level`.
+struct RefineSpec {
+  Box3 box;
+  int level = 0;
+};
+
+/// How to build an object's octree.
+struct OctreeSpec {
+  RootGeometry root;
+  int base_level = 3;
+  int max_level = 8;
+  std::vector<RefineSpec> refine;
+};
+
+/// A point of rest space bound to a leaf by trilinear weights.
+struct PointEmbedding {
+  int leaf = -1;
+  std::array<double, 8> weights{};  ///< trilinear weights of the leaf's 8 corners, sum 1
+};
+
+/// Constant description of one deformable object for one topology revision.
+class ObjectModel {
+ public:
+  /// Builds the octree (uniform to base_level, then the refine regions), drops empty leaves, and builds the DOFs.
+  static ObjectModel build(const OctreeSpec& octree, std::shared_ptr<const MaterialSource> material,
+                           const MaterialParams& params, std::vector<HandleSpec> handles);
+
+  /// A new revision in which each listed leaf (by index) is replaced by its non-empty children.
+  [[nodiscard]] ObjectModel refined(const std::vector<int>& leaves) const;
+
+  [[nodiscard]] const Octree& tree() const { return m_tree; }
+  [[nodiscard]] const RootGeometry& root() const { return m_root; }
+  [[nodiscard]] const DofMap& dofs() const { return m_dofs; }
+  [[nodiscard]] const MaterialSource& material() const { return *m_material; }
+  [[nodiscard]] const MaterialParams& params() const { return m_params; }
+  [[nodiscard]] const std::vector<HandleSpec>& handles() const { return m_handles; }
+  [[nodiscard]] int max_level() const { return m_max_level; }
+  [[nodiscard]] int revision() const { return m_revision; }
+  [[nodiscard]] int num_elements() const { return m_tree.size(); }
+  [[nodiscard]] int num_dofs() const { return m_dofs.num_dofs; }
+
+  [[nodiscard]] const std::vector<double>& occupancy() const { return m_occupancy; }  ///< (num_elements), [0,1]
+  [[nodiscard]] const std::vector<double>& edge() const { return m_edge; }            ///< (num_elements), m
+  [[nodiscard]] const std::vector<double>& dof_mass() const { return m_dof_mass; }    ///< lumped, kg (num_dofs)
+  /// Handle index that drives each DOF, or -1 for a free DOF (num_dofs).
+  [[nodiscard]] const std::vector<int>& dof_handle() const { return m_dof_handle; }
+  /// Rest positions of every slot, m (8 * num_elements).
+  [[nodiscard]] const std::vector<Vec3>& slot_rest() const { return m_slot_rest; }
+  /// Unit-cube stiffness for this material's Poisson ratio (E = 1, h = 1).
+  [[nodiscard]] const Mat24& unit_stiffness() const { return m_unit_k; }
+  /// Stiffness scale E * occupancy * h of each element, N/m (num_elements).
+  [[nodiscard]] const std::vector<double>& stiffness_scale() const { return m_k_scale; }
+  /// Total material volume, m^3.
+  [[nodiscard]] double volume() const;
+
+  /// Binds a rest-space point to the leaf that contains it (on a shared boundary: the first leaf found). Nullopt
+  /// when no leaf holds the point.
+  [[nodiscard]] std::optional<PointEmbedding> embed(const Vec3& rest) const;
+  /// Evaluates an embedded point from slot values (8 * num_elements).
+  [[nodiscard]] Vec3 evaluate(const PointEmbedding& e, const std::vector<Vec3>& slots) const;
+
+ private:
+  void finish();  // occupancy-dependent data, DOFs, masses, handles
+
+  RootGeometry m_root;
+  std::shared_ptr<const MaterialSource> m_material;
+  MaterialParams m_params;
+  std::vector<HandleSpec> m_handles;
+  int m_max_level = 8;
+  int m_revision = 0;
+  Octree m_tree;
+  DofMap m_dofs;
+  Mat24 m_unit_k;
+  std::vector<double> m_occupancy;   ///< (num_elements)
+  std::vector<double> m_edge;        ///< (num_elements), m
+  std::vector<double> m_k_scale;     ///< (num_elements), N/m
+  std::vector<double> m_dof_mass;    ///< (num_dofs), kg
+  std::vector<int> m_dof_handle;     ///< (num_dofs)
+  std::vector<Vec3> m_slot_rest;     ///< (8 * num_elements), m
+};
+
+/// What changes from step to step (MuJoCo's mjData in spirit).
+struct SimState {
+  double t = 0.0;                  ///< simulated time, s
+  std::vector<Vec3> x;             ///< DOF positions, m (num_dofs)
+  std::vector<Vec3> v;             ///< DOF velocities, m/s (num_dofs)
+
+  /// The rest state of a model: x = rest positions, v = 0.
+  static SimState rest(const ObjectModel& model);
+};
+
+/// Carries a state over to a new revision of the model: each new DOF takes the deformed position and velocity that
+/// the old model interpolates at its node, inside the old leaf that contains (or equals) one of its leaves. A split
+/// DOF thus inherits its parent's state, and refinement never makes the object jump.
+SimState transfer_state(const ObjectModel& from, const SimState& state, const ObjectModel& to);
+
+}  // namespace octocut::sim

@@ -1,0 +1,263 @@
+#include "octocut/sim/dof_map.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+#include <unordered_map>
+
+namespace octocut::sim {
+
+namespace {
+
+// Union-find over the 8 octants of one node.
+struct OctantSets {
+  std::array<int, 8> parent{0, 1, 2, 3, 4, 5, 6, 7};
+  int find(int a) {
+    while (parent[std::size_t(a)] != a) a = parent[std::size_t(a)] = parent[std::size_t(parent[std::size_t(a)])];
+    return a;
+  }
+  void unite(int a, int b) {
+    a = find(a);
+    b = find(b);
+    if (a != b) parent[std::size_t(std::max(a, b))] = std::min(a, b);
+  }
+};
+
+// How one slot is resolved before chains are followed: a DOF, or bound to the corners of a bigger leaf.
+struct SlotBinding {
+  int dof = -1;                     // >= 0: the slot is this DOF
+  int master = -1;                  // >= 0: hard-bound to this leaf's corner slots
+  std::array<double, 8> weights{};  // trilinear weights of the master's corners at the slot's node
+};
+
+// Trilinear weights of cell c's corners at grid point p (which lies in the closed cell).
+std::array<double, 8> corner_weights(const Cell& c, const GridPoint& p) {
+  const double s = double(c.size());
+  const double u = double(p.x - c.anchor.x) / s, v = double(p.y - c.anchor.y) / s, w = double(p.z - c.anchor.z) / s;
+  std::array<double, 8> out{};
+  for (int k = 0; k < 8; ++k) {
+    out[std::size_t(k)] = ((k & 1) ? u : 1.0 - u) * ((k & 2) ? v : 1.0 - v) * ((k & 4) ? w : 1.0 - w);
+  }
+  return out;
+}
+
+}  // namespace
+
+std::optional<std::pair<Box3, int>> common_face(const Cell& a, const Cell& b, const RootGeometry& root) {
+  const std::uint32_t sa = a.size(), sb = b.size();
+  const std::array<std::uint32_t, 3> amin{a.anchor.x, a.anchor.y, a.anchor.z}, bmin{b.anchor.x, b.anchor.y, b.anchor.z};
+  int axis = -1;
+  std::uint32_t plane = 0;
+  std::array<std::uint32_t, 3> lo{}, hi{};
+  for (int d = 0; d < 3; ++d) {
+    const std::uint32_t a0 = amin[std::size_t(d)], a1 = a0 + sa, b0 = bmin[std::size_t(d)], b1 = b0 + sb;
+    if (a1 == b0 || b1 == a0) {
+      // Touching along d: at most one such axis for face neighbours.
+      if (axis >= 0) return std::nullopt;
+      axis = d;
+      plane = (a1 == b0) ? a1 : a0;
+      lo[std::size_t(d)] = hi[std::size_t(d)] = plane;
+    } else {
+      lo[std::size_t(d)] = std::max(a0, b0);
+      hi[std::size_t(d)] = std::min(a1, b1);
+      if (hi[std::size_t(d)] <= lo[std::size_t(d)]) return std::nullopt;
+    }
+  }
+  if (axis < 0) return std::nullopt;
+  const Box3 face{root.to_world({lo[0], lo[1], lo[2]}), root.to_world({hi[0], hi[1], hi[2]})};
+  return std::make_pair(face, axis);
+}
+
+DofMap build_dof_map(const Octree& tree, const RootGeometry& root, const MaterialSource& material) {
+  const int num_leaves = tree.size();
+  const int num_slots = 8 * num_leaves;
+
+  // Logical nodes: the distinct corners of all leaves, sorted by key.
+  std::vector<std::uint64_t> nodes;
+  nodes.reserve(std::size_t(num_slots));
+  for (const Cell& c : tree.leaves())
+    for (int k = 0; k < 8; ++k) nodes.push_back(node_key(c.corner(k)));
+  std::sort(nodes.begin(), nodes.end());
+  nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
+
+  // Face connectivity of leaf pairs, cached: many nodes ask about the same pair.
+  std::unordered_map<std::uint64_t, bool> connected_cache;
+  auto connected = [&](int a, int b) {
+    if (a > b) std::swap(a, b);
+    const std::uint64_t key = (std::uint64_t(std::uint32_t(a)) << 32) | std::uint32_t(b);
+    auto it = connected_cache.find(key);
+    if (it != connected_cache.end()) return it->second;
+    const auto face = common_face(tree.leaf(a), tree.leaf(b), root);
+    const bool c = face && material.face_connected(face->first, face->second);
+    connected_cache.emplace(key, c);
+    return c;
+  };
+
+  DofMap map;
+  std::vector<SlotBinding> binding(static_cast<std::size_t>(num_slots));
+  std::vector<char> assigned(static_cast<std::size_t>(num_slots), 0);
+
+  for (const std::uint64_t key : nodes) {
+    const GridPoint n = node_from_key(key);
+    // The leaf covering each octant; octant bit d set = the octant lies on the + side of the node along d.
+    std::array<int, 8> leaf{};
+    for (int o = 0; o < 8; ++o) {
+      const bool px = o & 1, py = o & 2, pz = o & 4;
+      if ((!px && n.x == 0) || (!py && n.y == 0) || (!pz && n.z == 0) || (px && n.x == kGridCells) ||
+          (py && n.y == kGridCells) || (pz && n.z == kGridCells)) {
+        leaf[std::size_t(o)] = -1;
+        continue;
+      }
+      const GridPoint c{px ? n.x : n.x - 1, py ? n.y : n.y - 1, pz ? n.z : n.z - 1};
+      leaf[std::size_t(o)] = tree.locate_cell(c);
+    }
+
+    // Graph G_i: same leaf, or face-adjacent octants whose leaves are connected.
+    OctantSets sets;
+    for (int o = 0; o < 8; ++o) {
+      const int lo = leaf[std::size_t(o)];
+      if (lo < 0) continue;
+      for (int p = o + 1; p < 8; ++p) {
+        const int lp = leaf[std::size_t(p)];
+        if (lp < 0) continue;
+        const int diff = o ^ p;
+        if (lo == lp) {
+          sets.unite(o, p);
+        } else if ((diff == 1 || diff == 2 || diff == 4) && connected(lo, lp)) {
+          sets.unite(o, p);
+        }
+      }
+    }
+
+    // One DOF per component whose leaves all have the node as a corner; otherwise hard-bind to the coarsest leaf
+    // of the component that has the node inside a face or an edge.
+    for (int r = 0; r < 8; ++r) {
+      if (leaf[std::size_t(r)] < 0 || sets.find(r) != r) continue;
+      int master = -1;
+      for (int o = 0; o < 8; ++o) {
+        const int l = leaf[std::size_t(o)];
+        if (l < 0 || sets.find(o) != r || tree.leaf(l).has_corner(n)) continue;
+        if (master < 0 || tree.leaf(l).level < tree.leaf(master).level ||
+            (tree.leaf(l).level == tree.leaf(master).level && l < master))
+          master = l;
+      }
+      int dof = -1;
+      if (master < 0) {
+        dof = map.num_dofs++;
+        map.dof_rest.push_back(root.to_world(n));
+        map.dof_node.push_back(key);
+        map.dof_slot.push_back(-1);
+      }
+      for (int o = 0; o < 8; ++o) {
+        const int l = leaf[std::size_t(o)];
+        if (l < 0 || sets.find(o) != r || !tree.leaf(l).has_corner(n)) continue;
+        const std::size_t s = std::size_t(8 * l + (o ^ 7));
+        assigned[s] = 1;
+        if (dof >= 0) {
+          binding[s].dof = dof;
+          if (map.dof_slot[std::size_t(dof)] < 0) map.dof_slot[std::size_t(dof)] = int(s);
+        } else {
+          binding[s].master = master;
+          binding[s].weights = corner_weights(tree.leaf(master), n);
+        }
+      }
+    }
+  }
+  for (int s = 0; s < num_slots; ++s) {
+    if (!assigned[std::size_t(s)]) throw std::logic_error("build_dof_map: a slot was not reached by its node");
+  }
+
+  // Resolve chains of hanging slots coarse-to-fine: a master is always strictly coarser than the bound slot's leaf.
+  std::vector<std::vector<std::pair<int, double>>> rows(static_cast<std::size_t>(num_slots));
+  std::vector<char> done(static_cast<std::size_t>(num_slots), 0);
+  std::function<void(int, int)> resolve = [&](int s, int depth) {
+    if (done[std::size_t(s)]) return;
+    if (depth > kMaxDepth + 1) throw std::logic_error("build_dof_map: cyclic hard binding");
+    const SlotBinding& b = binding[std::size_t(s)];
+    auto& row = rows[std::size_t(s)];
+    if (b.dof >= 0) {
+      row.emplace_back(b.dof, 1.0);
+    } else {
+      std::map<int, double> acc;
+      for (int k = 0; k < 8; ++k) {
+        const double w = b.weights[std::size_t(k)];
+        if (w == 0.0) continue;
+        const int ms = 8 * b.master + k;
+        resolve(ms, depth + 1);
+        for (const auto& [d, wd] : rows[std::size_t(ms)]) acc[d] += w * wd;
+      }
+      for (const auto& [d, w] : acc)
+        if (w != 0.0) row.emplace_back(d, w);
+    }
+    done[std::size_t(s)] = 1;
+  };
+  map.slot_begin.assign(1, 0);
+  for (int s = 0; s < num_slots; ++s) {
+    resolve(s, 0);
+    if (binding[std::size_t(s)].dof < 0) ++map.hanging_slots;
+    for (const auto& [d, w] : rows[std::size_t(s)]) {
+      map.slot_dof.push_back(d);
+      map.slot_weight.push_back(w);
+    }
+    map.slot_begin.push_back(int(map.slot_dof.size()));
+  }
+  return map;
+}
+
+std::string DofMap::check_invariants() const {
+  std::ostringstream err;
+  std::vector<char> used(static_cast<std::size_t>(num_dofs), 0);
+  for (int s = 0; s < num_slots(); ++s) {
+    const int b = slot_begin[std::size_t(s)], e = slot_begin[std::size_t(s) + 1];
+    if (e <= b) {
+      err << "slot " << s << " resolves to no DOF";
+      return err.str();
+    }
+    double sum = 0.0;
+    for (int i = b; i < e; ++i) {
+      const int d = slot_dof[std::size_t(i)];
+      if (d < 0 || d >= num_dofs) {
+        err << "slot " << s << " references DOF " << d << " out of range";
+        return err.str();
+      }
+      used[std::size_t(d)] = 1;
+      sum += slot_weight[std::size_t(i)];
+    }
+    if (std::abs(sum - 1.0) > 1e-12) {
+      err << "row " << s << " of P sums to " << sum;
+      return err.str();
+    }
+  }
+  for (int d = 0; d < num_dofs; ++d) {
+    if (!used[std::size_t(d)]) {
+      err << "DOF " << d << " is referenced by no slot";
+      return err.str();
+    }
+  }
+  return {};
+}
+
+void DofMap::prolong(const std::vector<Vec3>& dofs, std::vector<Vec3>& slots) const {
+  slots.resize(std::size_t(num_slots()));
+  for (int s = 0; s < num_slots(); ++s) {
+    Vec3 p = Vec3::Zero();
+    for (int i = slot_begin[std::size_t(s)]; i < slot_begin[std::size_t(s) + 1]; ++i)
+      p += slot_weight[std::size_t(i)] * dofs[std::size_t(slot_dof[std::size_t(i)])];
+    slots[std::size_t(s)] = p;
+  }
+}
+
+SpMat DofMap::matrix() const {
+  std::vector<Eigen::Triplet<double>> t;
+  for (int s = 0; s < num_slots(); ++s)
+    for (int i = slot_begin[std::size_t(s)]; i < slot_begin[std::size_t(s) + 1]; ++i)
+      t.emplace_back(s, slot_dof[std::size_t(i)], slot_weight[std::size_t(i)]);
+  SpMat P(num_slots(), num_dofs);
+  P.setFromTriplets(t.begin(), t.end());
+  return P;
+}
+
+}  // namespace octocut::sim

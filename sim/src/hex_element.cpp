@@ -1,0 +1,97 @@
+#include "octocut/sim/hex_element.hpp"
+
+#include <Eigen/SVD>
+#include <cmath>
+
+namespace octocut::sim {
+
+Mat24 unit_hex_stiffness(double nu) {
+  // Isotropic elasticity for E = 1 in Voigt order (xx, yy, zz, xy, yz, zx) with engineering shear strains.
+  const double lambda = nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
+  const double mu = 1.0 / (2.0 * (1.0 + nu));
+  Eigen::Matrix<double, 6, 6> D = Eigen::Matrix<double, 6, 6>::Zero();
+  D.topLeftCorner<3, 3>().setConstant(lambda);
+  D.topLeftCorner<3, 3>().diagonal().array() += 2.0 * mu;
+  D.bottomRightCorner<3, 3>().diagonal().setConstant(mu);
+
+  // 2x2x2 Gauss quadrature on [0,1]^3, each point weighted 1/8.
+  const double g[2] = {0.5 - 0.5 / std::sqrt(3.0), 0.5 + 0.5 / std::sqrt(3.0)};
+  Mat24 K = Mat24::Zero();
+  for (int q = 0; q < 8; ++q) {
+    const double xi[3] = {g[q & 1], g[(q >> 1) & 1], g[(q >> 2) & 1]};
+    Eigen::Matrix<double, 6, 24> B = Eigen::Matrix<double, 6, 24>::Zero();
+    for (int a = 0; a < 8; ++a) {
+      // Shape function N_a = prod_d (bit ? xi_d : 1 - xi_d) and its gradient.
+      double f[3], df[3];
+      for (int d = 0; d < 3; ++d) {
+        const bool bit = (a >> d) & 1;
+        f[d] = bit ? xi[d] : 1.0 - xi[d];
+        df[d] = bit ? 1.0 : -1.0;
+      }
+      const double gx = df[0] * f[1] * f[2], gy = f[0] * df[1] * f[2], gz = f[0] * f[1] * df[2];
+      B(0, 3 * a + 0) = gx;
+      B(1, 3 * a + 1) = gy;
+      B(2, 3 * a + 2) = gz;
+      B(3, 3 * a + 0) = gy;
+      B(3, 3 * a + 1) = gx;
+      B(4, 3 * a + 1) = gz;
+      B(4, 3 * a + 2) = gy;
+      B(5, 3 * a + 0) = gz;
+      B(5, 3 * a + 2) = gx;
+    }
+    K.noalias() += 0.125 * B.transpose() * D * B;
+  }
+  return K;
+}
+
+Mat3 hex_center_gradient(const Eigen::Matrix<double, 3, 8>& x, double h) {
+  // At the centre, dN_a/dxi_d = +-1/4 with the sign of corner a's bit d.
+  Mat3 F = Mat3::Zero();
+  for (int a = 0; a < 8; ++a) {
+    const Vec3 g(((a & 1) ? 0.25 : -0.25), ((a & 2) ? 0.25 : -0.25), ((a & 4) ? 0.25 : -0.25));
+    F.noalias() += x.col(a) * g.transpose();
+  }
+  return F / h;
+}
+
+Mat3 polar_rotation(const Mat3& F) {
+  Eigen::JacobiSVD<Mat3> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Mat3 U = svd.matrixU();
+  const Mat3& V = svd.matrixV();
+  // Sign correction (Irving et al. 2004): flip the direction of the smallest singular value so det R = +1.
+  if ((U * V.transpose()).determinant() < 0.0) U.col(2) *= -1.0;
+  return U * V.transpose();
+}
+
+Vec24 corotated_displacement(const Mat3& R, const Vec24& x, const Vec24& X) {
+  // Relative to the element centroids: K annihilates translations exactly only in exact arithmetic, so removing
+  // them first keeps round-off independent of where the object is.
+  Vec3 xc = Vec3::Zero(), Xc = Vec3::Zero();
+  for (int a = 0; a < 8; ++a) {
+    xc += x.segment<3>(3 * a);
+    Xc += X.segment<3>(3 * a);
+  }
+  xc /= 8.0;
+  Xc /= 8.0;
+  Vec24 u;
+  for (int a = 0; a < 8; ++a) u.segment<3>(3 * a) = R.transpose() * (x.segment<3>(3 * a) - xc) - (X.segment<3>(3 * a) - Xc);
+  return u;
+}
+
+Vec24 corotated_force(const Mat24& K, const Mat3& R, const Vec24& x, const Vec24& X) {
+  const Vec24 local = corotated_displacement(R, x, X);
+  const Vec24 k = K * local;
+  Vec24 f;
+  for (int a = 0; a < 8; ++a) f.segment<3>(3 * a) = -(R * k.segment<3>(3 * a));
+  return f;
+}
+
+Mat24 corotated_stiffness(const Mat24& K, const Mat3& R) {
+  Mat24 out;
+  for (int a = 0; a < 8; ++a)
+    for (int b = 0; b < 8; ++b)
+      out.block<3, 3>(3 * a, 3 * b).noalias() = R * K.block<3, 3>(3 * a, 3 * b) * R.transpose();
+  return out;
+}
+
+}  // namespace octocut::sim

@@ -1,0 +1,255 @@
+#include "octocut/sim/object.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <stdexcept>
+
+namespace octocut::sim {
+
+namespace {
+
+// Volume of the intersection of two boxes, m^3.
+double overlap(const Box3& a, const Box3& b) {
+  const Vec3 e = (a.max.cwiseMin(b.max) - a.min.cwiseMax(b.min)).cwiseMax(0.0);
+  return e.x() * e.y() * e.z();
+}
+
+// Rotation for XYZ Euler angles in degrees: first about x, then y, then z (fixed axes).
+Mat3 euler_xyz(const Vec3& deg) {
+  const Vec3 r = deg * (std::numbers::pi / 180.0);
+  return (Eigen::AngleAxisd(r.z(), Vec3::UnitZ()) * Eigen::AngleAxisd(r.y(), Vec3::UnitY()) *
+          Eigen::AngleAxisd(r.x(), Vec3::UnitX()))
+      .toRotationMatrix();
+}
+
+// Trilinear weights of a point with local coordinates u in [0,1]^3.
+std::array<double, 8> trilinear(const Vec3& u) {
+  std::array<double, 8> w{};
+  for (int k = 0; k < 8; ++k)
+    w[std::size_t(k)] = ((k & 1) ? u.x() : 1.0 - u.x()) * ((k & 2) ? u.y() : 1.0 - u.y()) *
+                        ((k & 4) ? u.z() : 1.0 - u.z());
+  return w;
+}
+
+// A leaf together with the material fraction it holds.
+struct OccupiedCell {
+  Cell cell;
+  double occupancy = 0.0;
+};
+
+}  // namespace
+
+Vec3 HandleSpec::position(const Vec3& X, double t) const {
+  if (keyframes.empty()) return X;
+  // Piecewise-linear keyframes; before the first one the handle moves from its rest pose at t = 0.
+  HandleKeyframe a{0.0, Vec3::Zero(), Vec3::Zero()}, b = keyframes.front();
+  if (t >= keyframes.back().t) {
+    a = b = keyframes.back();
+  } else if (t > keyframes.front().t) {
+    for (std::size_t i = 1; i < keyframes.size(); ++i) {
+      if (t <= keyframes[i].t) {
+        a = keyframes[i - 1];
+        b = keyframes[i];
+        break;
+      }
+    }
+  } else if (keyframes.front().t <= 0.0) {
+    a = b;
+  }
+  const double s = (b.t > a.t) ? std::clamp((t - a.t) / (b.t - a.t), 0.0, 1.0) : 1.0;
+  const Vec3 T = (1.0 - s) * a.translation + s * b.translation;
+  const Mat3 R = euler_xyz((1.0 - s) * a.rotation_deg + s * b.rotation_deg);
+  const Vec3 c = 0.5 * (box.min + box.max);
+  return c + R * (X - c) + T;
+}
+
+ObjectModel ObjectModel::build(const OctreeSpec& spec, std::shared_ptr<const MaterialSource> material,
+                               const MaterialParams& params, std::vector<HandleSpec> handles) {
+  if (!material) throw std::invalid_argument("ObjectModel::build: no material");
+  if (spec.base_level < 0 || spec.max_level > kMaxDepth || spec.base_level > spec.max_level)
+    throw std::invalid_argument("ObjectModel::build: need 0 <= base_level <= max_level <= 20");
+  ObjectModel m;
+  m.m_root = spec.root;
+  m.m_material = std::move(material);
+  m.m_params = params;
+  m.m_handles = std::move(handles);
+  m.m_max_level = spec.max_level;
+
+  // Target level of a cell: the base level, raised by every refine region it overlaps with positive volume.
+  auto target = [&](const Box3& box) {
+    int level = spec.base_level;
+    for (const RefineSpec& r : spec.refine)
+      if (overlap(box, r.box) > 0.0) level = std::max(level, std::min(r.level, spec.max_level));
+    return level;
+  };
+
+  // Depth-first subdivision from the root; empty cells are dropped with their whole subtree.
+  std::vector<OccupiedCell> leaves;
+  std::vector<Cell> stack{Cell{}};
+  while (!stack.empty()) {
+    const Cell c = stack.back();
+    stack.pop_back();
+    const Box3 box = m.m_root.cell_box(c);
+    const double occ = m.m_material->occupancy(box);
+    if (occ < kEmptyOccupancy) continue;
+    if (c.level < target(box)) {
+      for (int k = 7; k >= 0; --k) stack.push_back(c.child(k));
+    } else {
+      leaves.push_back({c, occ});
+    }
+  }
+  if (leaves.empty()) throw std::invalid_argument("ObjectModel::build: the material does not meet the octree root");
+
+  std::vector<Cell> cells;
+  cells.reserve(leaves.size());
+  for (const auto& l : leaves) cells.push_back(l.cell);
+  m.m_tree = Octree(std::move(cells));
+  m.finish();
+  return m;
+}
+
+ObjectModel ObjectModel::refined(const std::vector<int>& leaves) const {
+  std::vector<char> split(std::size_t(num_elements()), 0);
+  for (int i : leaves) {
+    if (i < 0 || i >= num_elements()) throw std::out_of_range("ObjectModel::refined: leaf index out of range");
+    if (m_tree.leaf(i).level < m_max_level) split[std::size_t(i)] = 1;
+  }
+  std::vector<Cell> cells;
+  cells.reserve(m_tree.leaves().size() + 7 * leaves.size());
+  for (int i = 0; i < num_elements(); ++i) {
+    const Cell& c = m_tree.leaf(i);
+    if (!split[std::size_t(i)]) {
+      cells.push_back(c);
+      continue;
+    }
+    for (int k = 0; k < 8; ++k) {
+      const Cell ch = c.child(k);
+      if (m_material->occupancy(m_root.cell_box(ch)) >= kEmptyOccupancy) cells.push_back(ch);
+    }
+  }
+  ObjectModel m = *this;
+  m.m_tree = Octree(std::move(cells));
+  m.m_revision = m_revision + 1;
+  m.finish();
+  return m;
+}
+
+void ObjectModel::finish() {
+  const int ne = m_tree.size();
+  m_unit_k = unit_hex_stiffness(m_params.poisson_ratio);
+
+  // Per-element geometry, occupancy and stiffness scale.
+  m_occupancy.resize(std::size_t(ne));
+  m_edge.resize(std::size_t(ne));
+  m_k_scale.resize(std::size_t(ne));
+  m_slot_rest.resize(8 * std::size_t(ne));
+  for (int e = 0; e < ne; ++e) {
+    const Cell& c = m_tree.leaf(e);
+    const double h = m_root.cell_edge(c);
+    m_edge[std::size_t(e)] = h;
+    m_occupancy[std::size_t(e)] = m_material->occupancy(m_root.cell_box(c));
+    m_k_scale[std::size_t(e)] = m_params.young_modulus * m_occupancy[std::size_t(e)] * h;
+    for (int k = 0; k < 8; ++k) m_slot_rest[8 * std::size_t(e) + std::size_t(k)] = m_root.to_world(c.corner(k));
+  }
+
+  // DOFs by node splitting and hard binding.
+  m_dofs = build_dof_map(m_tree, m_root, *m_material);
+
+  // Lumped mass rho phi h^3 / 8 per slot, gathered to DOFs through P^T.
+  m_dof_mass.assign(std::size_t(m_dofs.num_dofs), 0.0);
+  for (int s = 0; s < m_dofs.num_slots(); ++s) {
+    const int e = s / 8;
+    const double h = m_edge[std::size_t(e)];
+    const double ms = m_params.density * m_occupancy[std::size_t(e)] * h * h * h / 8.0;
+    for (int i = m_dofs.slot_begin[std::size_t(s)]; i < m_dofs.slot_begin[std::size_t(s) + 1]; ++i)
+      m_dof_mass[std::size_t(m_dofs.slot_dof[std::size_t(i)])] += m_dofs.slot_weight[std::size_t(i)] * ms;
+  }
+
+  // Handles: a DOF whose rest position lies in a handle's box follows the first such handle.
+  const double eps = 1e-9 * m_root.size;
+  m_dof_handle.assign(std::size_t(m_dofs.num_dofs), -1);
+  for (int d = 0; d < m_dofs.num_dofs; ++d) {
+    for (std::size_t h = 0; h < m_handles.size(); ++h) {
+      if (m_handles[h].box.contains(m_dofs.dof_rest[std::size_t(d)], eps)) {
+        m_dof_handle[std::size_t(d)] = int(h);
+        break;
+      }
+    }
+  }
+}
+
+double ObjectModel::volume() const {
+  double v = 0.0;
+  for (int e = 0; e < num_elements(); ++e) v += m_occupancy[std::size_t(e)] * std::pow(m_edge[std::size_t(e)], 3);
+  return v;
+}
+
+std::optional<PointEmbedding> ObjectModel::embed(const Vec3& rest) const {
+  // Fixed-point coordinates on the finest grid, clamped into the root.
+  const Vec3 g = (rest - m_root.min) / m_root.unit();
+  if (!g.allFinite() || (g.array() < -1e-6).any() || (g.array() > double(kGridCells) + 1e-6).any())
+    return std::nullopt;
+  auto to_int = [](double v) {
+    return std::uint32_t(std::clamp(std::floor(v), 0.0, double(kGridCells)));
+  };
+  const int leaf = m_tree.locate_point({to_int(g.x()), to_int(g.y()), to_int(g.z())});
+  if (leaf < 0) return std::nullopt;
+  const Box3 box = m_root.cell_box(m_tree.leaf(leaf));
+  const Vec3 u = ((rest - box.min).array() / (box.max - box.min).array()).matrix().cwiseMax(0.0).cwiseMin(1.0);
+  return PointEmbedding{leaf, trilinear(u)};
+}
+
+Vec3 ObjectModel::evaluate(const PointEmbedding& e, const std::vector<Vec3>& slots) const {
+  Vec3 p = Vec3::Zero();
+  for (int k = 0; k < 8; ++k) p += e.weights[std::size_t(k)] * slots[8 * std::size_t(e.leaf) + std::size_t(k)];
+  return p;
+}
+
+SimState SimState::rest(const ObjectModel& model) {
+  SimState s;
+  s.x = model.dofs().dof_rest;
+  s.v.assign(s.x.size(), Vec3::Zero());
+  return s;
+}
+
+SimState transfer_state(const ObjectModel& from, const SimState& state, const ObjectModel& to) {
+  std::vector<Vec3> xs, vs;
+  from.dofs().prolong(state.x, xs);
+  from.dofs().prolong(state.v, vs);
+
+  SimState out;
+  out.t = state.t;
+  const DofMap& dm = to.dofs();
+  out.x.resize(std::size_t(dm.num_dofs));
+  out.v.resize(std::size_t(dm.num_dofs));
+  for (int d = 0; d < dm.num_dofs; ++d) {
+    // The old leaf that contains the new DOF's own leaf interpolates the old field at the DOF's node.
+    const int slot = dm.dof_slot[std::size_t(d)];
+    const Cell& leaf = to.tree().leaf(slot / 8);
+    int old = from.tree().locate_cell(leaf.anchor);
+    if (old >= 0 && from.tree().leaf(old).level > leaf.level) old = -1;
+    const GridPoint n = node_from_key(dm.dof_node[std::size_t(d)]);
+    if (old < 0) old = from.tree().locate_point(n);
+    if (old < 0) {
+      out.x[std::size_t(d)] = dm.dof_rest[std::size_t(d)];
+      out.v[std::size_t(d)] = Vec3::Zero();
+      continue;
+    }
+    const Cell& oc = from.tree().leaf(old);
+    const double s = double(oc.size());
+    const Vec3 u((double(n.x) - double(oc.anchor.x)) / s, (double(n.y) - double(oc.anchor.y)) / s,
+                 (double(n.z) - double(oc.anchor.z)) / s);
+    const std::array<double, 8> w = trilinear(u.cwiseMax(0.0).cwiseMin(1.0));
+    Vec3 x = Vec3::Zero(), v = Vec3::Zero();
+    for (int k = 0; k < 8; ++k) {
+      x += w[std::size_t(k)] * xs[8 * std::size_t(old) + std::size_t(k)];
+      v += w[std::size_t(k)] * vs[8 * std::size_t(old) + std::size_t(k)];
+    }
+    out.x[std::size_t(d)] = x;
+    out.v[std::size_t(d)] = v;
+  }
+  return out;
+}
+
+}  // namespace octocut::sim

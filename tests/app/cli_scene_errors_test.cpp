@@ -1,0 +1,106 @@
+// Command-line smoke tests for bad scenes (SPEC §7): `octocut validate` exits with 2 and prints the file and the
+// JSON pointer of the problem; a valid scene exits with 0.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+/// The exit status and the combined stdout and stderr of one command.
+struct CommandResult {
+  int exit_code = -1;  ///< -1 when the process did not exit normally
+  std::string output;
+};
+
+/// Runs `octocut <arguments>` through the shell, capturing stderr with stdout.
+CommandResult run_octocut(const std::string& arguments) {
+  const std::string command = std::string("'") + OCTOCUT_EXE + "' " + arguments + " 2>&1";
+  CommandResult result;
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (pipe == nullptr) return result;
+  char buffer[4096];
+  while (const std::size_t count = std::fread(buffer, 1, sizeof buffer, pipe)) result.output.append(buffer, count);
+  const int status = ::pclose(pipe);
+  if (status != -1 && WIFEXITED(status)) result.exit_code = WEXITSTATUS(status);
+  return result;
+}
+
+/// Gives each test a fresh directory for its scene files, removed afterwards.
+class CliSceneErrorsTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const std::string test = ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    m_dir = fs::temp_directory_path() / ("octocut_cli_test_" + std::to_string(::getpid()) + "_" + test);
+    fs::remove_all(m_dir);
+    fs::create_directories(m_dir);
+  }
+
+  void TearDown() override { fs::remove_all(m_dir); }
+
+  /// Writes `text` to `name` in the test directory and returns the path.
+  std::string write(const std::string& name, const std::string& text) const {
+    const fs::path path = m_dir / name;
+    std::ofstream(path, std::ios::binary) << text;
+    return path.string();
+  }
+
+  /// Runs `octocut validate` on `path`.
+  static CommandResult validate(const std::string& path) { return run_octocut("validate '" + path + "'"); }
+
+  fs::path m_dir;
+};
+
+TEST_F(CliSceneErrorsTest, ValidBoxSceneExitsZero) {
+  const std::string path =
+      write("box.json", R"({"object": {"surface": {"box": {"min": [0, 0, 0], "max": [0.01, 0.01, 0.01]}}}})");
+  const CommandResult result = validate(path);
+  EXPECT_EQ(result.exit_code, 0) << result.output;
+}
+
+TEST_F(CliSceneErrorsTest, MalformedJsonExitsTwoWithLineAndColumn) {
+  const std::string path = write("malformed.json", "{\n  \"duration\": 1,\n  }\n");
+  const CommandResult result = validate(path);
+  EXPECT_EQ(result.exit_code, 2) << result.output;
+  EXPECT_NE(result.output.find(path + ":3:3: malformed JSON"), std::string::npos) << result.output;
+}
+
+TEST_F(CliSceneErrorsTest, UnknownKeyExitsTwoWithPointer) {
+  const std::string path = write(
+      "unknown.json", R"({"object": {"surface": {"box": {"min": [0, 0, 0], "max": [1, 1, 1]}}, "materail": {}}})");
+  const CommandResult result = validate(path);
+  EXPECT_EQ(result.exit_code, 2) << result.output;
+  EXPECT_NE(result.output.find(path + ": /object/materail: unknown key"), std::string::npos) << result.output;
+}
+
+TEST_F(CliSceneErrorsTest, OutOfRangeExitsTwoWithPointer) {
+  const std::string path = write(
+      "range.json", R"({"solver": {"dt": -1}, "object": {"surface": {"box": {"min": [0, 0, 0], "max": [1, 1, 1]}}}})");
+  const CommandResult result = validate(path);
+  EXPECT_EQ(result.exit_code, 2) << result.output;
+  EXPECT_NE(result.output.find(path + ": /solver/dt: must be > 0, got -1"), std::string::npos) << result.output;
+}
+
+TEST_F(CliSceneErrorsTest, MissingSceneFileExitsTwo) {
+  const std::string path = (m_dir / "absent.json").string();
+  const CommandResult result = validate(path);
+  EXPECT_EQ(result.exit_code, 2) << result.output;
+  EXPECT_NE(result.output.find(path + ": cannot read"), std::string::npos) << result.output;
+}
+
+TEST_F(CliSceneErrorsTest, MissingMeshFileExitsTwoWithPointer) {
+  const std::string path = write("mesh.json", R"({"object": {"surface": "absent.obj"}})");
+  const CommandResult result = validate(path);
+  EXPECT_EQ(result.exit_code, 2) << result.output;
+  EXPECT_NE(result.output.find(path + ": /object/surface: file not found: " + (m_dir / "absent.obj").string()),
+            std::string::npos)
+      << result.output;
+}
+
+}  // namespace

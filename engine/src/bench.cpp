@@ -1,0 +1,197 @@
+#include "octocut/engine/bench.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+#include <thread>
+
+#include "octocut/sim/simulator.hpp"
+#include "report.hpp"
+
+namespace octocut::engine {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using json = nlohmann::ordered_json;
+
+struct BenchOutput {
+  std::string name;
+  long runs = 0;
+  TimingSummary ms;
+  json params = json::object();
+  json metrics = json::object();
+};
+
+// The step benchmark of issue 2: a 1 cm cube of 10 x 10 x 10 leaves (E = 5e4 Pa, nu = 0.45, rho = 1000 kg/m^3),
+// bottom fixed, under gravity, dt = 1 ms.
+sim::ObjectModel cube10() {
+  sim::OctreeSpec spec;
+  spec.root = {sim::Vec3::Zero(), 0.016};  // level 4 cells are 1 mm
+  spec.base_level = 4;
+  spec.max_level = 8;
+  sim::MaterialParams p;
+  p.young_modulus = 5e4;
+  p.poisson_ratio = 0.45;
+  p.density = 1000.0;
+  sim::HandleSpec bottom{{sim::Vec3(-0.001, -0.001, -0.001), sim::Vec3(0.011, 0.011, 1e-9)}, {}};
+  return sim::ObjectModel::build(spec, std::make_shared<sim::BoxMaterial>(sim::Box3{sim::Vec3::Zero(), sim::Vec3::Constant(0.01)}),
+                                 p, {bottom});
+}
+
+struct StepRun {
+  std::vector<double> step_ms;
+  std::vector<sim::Vec3> probe;  // displacement of the top-centre probe after each step, m
+  std::vector<sim::StepProfile> profile;
+  long iterations = 0, refactorizations = 0;
+  sim::StabilityStats stats;
+};
+
+StepRun run_cube(const std::string& solver, const std::string& preconditioner, double tolerance, int steps,
+                 int threads) {
+  sim::SimulatorOptions o;
+  o.dt = 1e-3;
+  o.linear_solver = solver;
+  o.preconditioner = preconditioner;
+  o.tolerance = tolerance;
+  o.threads = threads;
+  sim::Simulator s(cube10(), o);
+  const sim::Vec3 top(0.005, 0.005, 0.01);
+  const auto e = *s.model().embed(top);
+  StepRun r;
+  for (int i = 0; i < steps; ++i) {
+    const auto t0 = Clock::now();
+    s.step();
+    r.step_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+    r.probe.push_back(s.position(e) - top);
+    r.profile.push_back(s.profile());
+    r.iterations += s.last_solve().iterations;
+    r.refactorizations += s.last_solve().refactorized ? 1 : 0;
+  }
+  r.stats = s.stats();
+  return r;
+}
+
+double median_of(std::vector<double> v) { return TimingSummary::of(std::move(v)).median; }
+
+std::vector<BenchOutput> bench_step(const std::string& variant) {
+  const int steps = 400;
+  const int threads = 0;
+  // The exact reference: CHOLMOD factorises and solves every step.
+  const StepRun ref = run_cube("cholmod", "cholesky", 1e-12, steps, threads);
+  StepRun run;
+  if (variant == "cube10")
+    run = run_cube("pcg", "cholesky", 1e-3, steps, threads);
+  else if (variant == "cube10-jacobi")
+    run = run_cube("pcg", "jacobi", 1e-4, steps, threads);
+  else
+    run = ref;
+
+  // Relative probe error: the largest deviation from the exact run over the whole run, over the largest exact
+  // displacement.
+  double max_dev = 0.0, max_ref = 0.0;
+  for (std::size_t i = 0; i < ref.probe.size(); ++i) {
+    max_dev = std::max(max_dev, (run.probe[i] - ref.probe[i]).norm());
+    max_ref = std::max(max_ref, ref.probe[i].norm());
+  }
+  const sim::ObjectModel m = cube10();
+  BenchOutput b;
+  b.name = "step/" + variant;
+  // The first steps include the symbolic analysis and the first factorisation: report steady state.
+  const std::vector<double> steady(run.step_ms.begin() + 10, run.step_ms.end());
+  b.runs = long(steady.size());
+  b.ms = TimingSummary::of(steady);
+  const std::string solver = variant == "cube10-cholmod" ? "cholmod" : "pcg";
+  const std::string pre = variant == "cube10-jacobi" ? "jacobi" : (solver == "pcg" ? "cholesky" : "none");
+  b.params = {{"leaves", "10x10x10"}, {"edge_m", 0.01}, {"young_modulus_pa", 5e4}, {"poisson_ratio", 0.45},
+              {"density_kg_m3", 1000.0}, {"dt_s", 1e-3}, {"steps", steps}, {"linear_solver", solver},
+              {"preconditioner", pre}, {"threads", int(std::thread::hardware_concurrency())}};
+  std::vector<double> rot, frc, asmb, slv;
+  for (std::size_t i = 10; i < run.profile.size(); ++i) {
+    rot.push_back(run.profile[i].rotations);
+    frc.push_back(run.profile[i].forces);
+    asmb.push_back(run.profile[i].assembly);
+    slv.push_back(run.profile[i].solve);
+  }
+  b.metrics = {{"elements", m.num_elements()},
+               {"dofs", m.num_dofs()},
+               {"rel_error_vs_exact", max_ref > 0 ? max_dev / max_ref : 0.0},
+               {"rotations_ms", median_of(rot)},
+               {"forces_ms", median_of(frc)},
+               {"assembly_ms", median_of(asmb)},
+               {"solve_ms", median_of(slv)},
+               {"mean_pcg_iterations", double(run.iterations) / steps},
+               {"refactorizations", run.refactorizations},
+               {"recoveries", run.stats.recoveries}};
+  return {b};
+}
+
+struct Entry {
+  std::string name;
+  std::function<std::vector<BenchOutput>()> run;
+};
+
+std::vector<Entry> registry() {
+  return {{"step/cube10", [] { return bench_step("cube10"); }},
+          {"step/cube10-jacobi", [] { return bench_step("cube10-jacobi"); }},
+          {"step/cube10-cholmod", [] { return bench_step("cube10-cholmod"); }}};
+}
+
+std::string cpu_name() {
+  std::ifstream in("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("model name", 0) == 0) {
+      const auto c = line.find(':');
+      if (c != std::string::npos) return line.substr(c + 2);
+    }
+  }
+  return "unknown";
+}
+
+}  // namespace
+
+std::vector<std::string> benchmark_names() {
+  std::vector<std::string> out;
+  for (const Entry& e : registry()) out.push_back(e.name);
+  return out;
+}
+
+std::string run_benchmarks(const std::vector<std::string>& filters, bool quiet) {
+  std::vector<Entry> selected;
+  for (const Entry& e : registry()) {
+    const bool match = filters.empty() || std::any_of(filters.begin(), filters.end(), [&](const std::string& f) {
+                         return e.name == f || e.name.rfind(f + "/", 0) == 0;
+                       });
+    if (match) selected.push_back(e);
+  }
+  for (const std::string& f : filters) {
+    if (std::none_of(selected.begin(), selected.end(),
+                     [&](const Entry& e) { return e.name == f || e.name.rfind(f + "/", 0) == 0; }))
+      throw std::invalid_argument("no benchmark matches '" + f + "'");
+  }
+  json doc;
+  doc["schema"] = "octocut.bench/1";
+  doc["machine"] = {{"cpu", cpu_name()}, {"threads", int(std::thread::hardware_concurrency())}};
+  doc["benchmarks"] = json::array();
+  if (!quiet) std::printf("%-24s %6s %10s %10s  metrics\n", "benchmark", "runs", "median_ms", "p95_ms");
+  for (const Entry& e : selected) {
+    for (const BenchOutput& b : e.run()) {
+      doc["benchmarks"].push_back({{"name", b.name},
+                                   {"runs", b.runs},
+                                   {"median_ms", b.ms.median},
+                                   {"p95_ms", b.ms.p95},
+                                   {"params", b.params},
+                                   {"metrics", b.metrics}});
+      if (!quiet) std::printf("%-24s %6ld %10.3f %10.3f  %s\n", b.name.c_str(), b.runs, b.ms.median, b.ms.p95,
+                              b.metrics.dump().c_str());
+    }
+  }
+  return doc.dump(2) + "\n";
+}
+
+}  // namespace octocut::engine

@@ -1,0 +1,219 @@
+#include "octocut/engine/world.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <optional>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+
+#include "octocut/engine/io.hpp"
+#include "octocut/engine/scene_loader.hpp"
+#include "report.hpp"
+
+namespace octocut::engine {
+
+namespace {
+
+sim::Vec3 v3(const std::array<double, 3>& a) { return {a[0], a[1], a[2]}; }
+std::array<double, 3> a3(const sim::Vec3& v) { return {v.x(), v.y(), v.z()}; }
+sim::Box3 box3(const SceneBox& b) { return {v3(b.min), v3(b.max)}; }
+
+// Set by SIGINT/SIGTERM: the run stops at the next step and still writes its report.
+std::atomic<bool> g_interrupted{false};
+extern "C" void on_signal(int) { g_interrupted = true; }
+
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+}  // namespace
+
+sim::ObjectModel build_object(const Scene& scene) {
+  const ObjectSettings& o = scene.object;
+  if (!o.surface_is_box)
+    throw SceneError(scene.file + ": /object/surface: mesh surfaces are not supported by this build yet (they land "
+                                  "with the geometry issue); use {\"box\": {\"min\": [...], \"max\": [...]}}");
+  auto material = std::make_shared<sim::BoxMaterial>(box3(o.surface_box));
+  const sim::Box3 bounds = material->bounds();
+
+  // Root cube: given, or the material's bounding box made cubic and grown by 5%.
+  sim::OctreeSpec spec;
+  if (o.octree.has_root) {
+    spec.root = {v3(o.octree.root_min), o.octree.root_size};
+    const sim::Box3 root_box{spec.root.min, spec.root.min + sim::Vec3::Constant(spec.root.size)};
+    if (!root_box.contains(bounds.min, 1e-12 * spec.root.size) || !root_box.contains(bounds.max, 1e-12 * spec.root.size))
+      throw SceneError(scene.file + ": /object/octree/root: the root cube does not contain the object");
+  } else {
+    const double size = 1.05 * (bounds.max - bounds.min).maxCoeff();
+    spec.root = {0.5 * (bounds.min + bounds.max) - sim::Vec3::Constant(0.5 * size), size};
+  }
+  // `uniform`: no adaptivity, the whole object at max_level.
+  spec.base_level = o.octree.uniform ? o.octree.max_level : o.octree.base_level;
+  spec.max_level = o.octree.max_level;
+  for (const RefineRegion& r : o.octree.refine) spec.refine.push_back({box3(r.box), r.level});
+
+  std::vector<sim::HandleSpec> handles;
+  for (const Handle& h : o.handles) {
+    sim::HandleSpec hs{box3(h.box), {}};
+    for (const HandleKeyframe& k : h.keyframes) hs.keyframes.push_back({k.t, v3(k.translation), v3(k.rotation_deg)});
+    handles.push_back(std::move(hs));
+  }
+  sim::MaterialParams params{o.material.young_modulus, o.material.poisson_ratio, o.material.density,
+                             o.material.rayleigh_mass, o.material.rayleigh_stiffness};
+  sim::ObjectModel model = sim::ObjectModel::build(spec, material, params, std::move(handles));
+
+  // Probes must lie in material.
+  for (std::size_t i = 0; i < scene.probes.size(); ++i) {
+    if (!model.embed(v3(scene.probes[i].point)))
+      throw SceneError(scene.file + ": /probes/" + std::to_string(i) + "/point: outside the object's material");
+  }
+  return model;
+}
+
+sim::SimulatorOptions simulator_options(const Scene& scene) {
+  const SolverSettings& s = scene.solver;
+  sim::SimulatorOptions o;
+  o.dynamic = s.mode == "dynamic";
+  o.dt = s.dt;
+  o.gravity = v3(s.gravity);
+  o.linear_solver = s.linear_solver;
+  o.tolerance = s.tolerance;
+  o.max_iterations = s.max_iterations;
+  o.threads = s.threads;
+  o.max_speed = s.max_speed;
+  return o;
+}
+
+RunResult run_scene(const Scene& scene, const RunOptions& options) {
+  RunResult result;
+  namespace fs = std::filesystem;
+  const fs::path out(options.out_dir);
+  result.report_path = (out / "report.json").string();
+
+  // Everything that is bad input is found before the output directory is touched.
+  if (scene.render.enabled && !options.no_render) {
+    result.exit_code = 2;
+    result.error = scene.file + ": /render/enabled: rendering was requested, but this build has no renderer yet "
+                                "(EGL rendering lands with the rendering issue); run with --no-render";
+    return result;
+  }
+  std::optional<sim::ObjectModel> model;
+  try {
+    model = build_object(scene);
+  } catch (const SceneError& e) {
+    result.exit_code = 2;
+    result.error = e.what();
+    return result;
+  } catch (const std::invalid_argument& e) {
+    result.exit_code = 2;
+    result.error = scene.file + ": /object: " + e.what();
+    return result;
+  }
+  std::error_code ec;
+  fs::create_directories(out, ec);
+  if (ec) {
+    result.exit_code = 1;
+    result.error = options.out_dir + ": cannot create the output directory: " + ec.message();
+    return result;
+  }
+
+  Report report;
+  report.scene = scene.file;
+  report.name = scene.name;
+  const auto wall0 = Clock::now();
+  std::vector<double> step_ms;
+  g_interrupted = false;
+  auto old_int = std::signal(SIGINT, on_signal);
+  auto old_term = std::signal(SIGTERM, on_signal);
+
+  try {
+    sim::Simulator sim(std::move(*model), simulator_options(scene));
+    const sim::ObjectModel& m = sim.model();
+    report.elements = m.num_elements();
+    report.dofs = m.num_dofs();
+    report.hanging_slots = m.dofs().hanging_slots;
+    // A box primitive's surface: 8 vertices, 12 triangles, one closed component.
+    report.surface_vertices = 8;
+    report.surface_triangles = 12;
+    report.surface_components = 1;
+    report.rest_volume_m3 = m.material().bounds().volume();
+    for (std::size_t h = 0; h < m.handles().size(); ++h) {
+      if (std::none_of(m.dof_handle().begin(), m.dof_handle().end(), [&](int d) { return d == int(h); }))
+        report.warnings.push_back("/object/handles/" + std::to_string(h) + ": the handle holds no DOF");
+    }
+    if (scene.output.surface_final || scene.output.surface_every > 0)
+      report.warnings.push_back("/output: surface output needs an embedded mesh surface (geometry issue); none written");
+    if (scene.output.frames && options.no_render)
+      report.warnings.push_back("/output/frames: --no-render given, no frames written");
+
+    // Timeline: fixed steps of dt up to the duration.
+    const long steps = std::max(1L, long(std::ceil(scene.duration / scene.solver.dt - 1e-9)));
+    const bool tty = options.progress && isatty(STDERR_FILENO);
+    auto last_progress = Clock::now();
+    for (long i = 0; i < steps; ++i) {
+      if (g_interrupted) throw std::runtime_error("interrupted by a signal");
+      const auto t0 = Clock::now();
+      sim.step();
+      step_ms.push_back(ms_since(t0));
+      report.steps = i + 1;
+      if (tty && (ms_since(last_progress) > 200.0 || i + 1 == steps)) {
+        last_progress = Clock::now();
+        std::fprintf(stderr, "\r[octocut] step %ld/%ld  t = %.4f s  %.2f ms/step   ", i + 1, steps, sim.state().t,
+                     step_ms.back());
+        if (i + 1 == steps) std::fprintf(stderr, "\n");
+      }
+    }
+
+    // Results: probes, energies, stability counters.
+    for (const Probe& p : scene.probes) {
+      const auto e = m.embed(v3(p.point));
+      report.probes.push_back({p.name, p.point, a3(sim.position(*e) - v3(p.point))});
+    }
+    bool finite = true;
+    for (std::size_t d = 0; d < sim.state().x.size(); ++d)
+      finite = finite && sim.state().x[d].allFinite() && sim.state().v[d].allFinite();
+    report.finite = finite;
+    const sim::StabilityStats& st = sim.stats();
+    report.recoveries = st.recoveries;
+    report.failed_steps = st.failed_steps;
+    report.solver_failures = st.solver_failures;
+    report.nonfinite = st.nonfinite;
+    report.speed_limit = st.speed_limit;
+    report.newton_unconverged = st.newton_unconverged;
+    report.max_speed_m_s = st.max_speed;
+    report.kinetic_j = sim.kinetic_energy();
+    report.elastic_j = sim.elastic_energy();
+    report.sim_time_s = sim.state().t;
+    if (st.failed_steps > 0)
+      report.warnings.push_back(std::to_string(st.failed_steps) +
+                                " steps failed at the smallest dt and were reset (velocities zeroed)");
+    if (st.newton_unconverged > 0)
+      report.warnings.push_back(std::to_string(st.newton_unconverged) + " static solves stopped unconverged");
+    if (!finite) throw std::runtime_error("the state is not finite");
+  } catch (const std::exception& e) {
+    report.status = "failed";
+    report.error = e.what();
+    result.exit_code = 1;
+    result.error = e.what();
+  }
+  std::signal(SIGINT, old_int);
+  std::signal(SIGTERM, old_term);
+
+  report.step_ms = TimingSummary::of(step_ms);
+  report.wall_time_s = ms_since(wall0) / 1000.0;
+  try {
+    write_file_atomic(result.report_path, report_json(report));
+  } catch (const std::exception& e) {
+    result.exit_code = 1;
+    result.error = e.what();
+  }
+  return result;
+}
+
+}  // namespace octocut::engine

@@ -1,6 +1,7 @@
 #include "octocut/sim/simulator.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <functional>
 #include <stdexcept>
@@ -351,10 +352,19 @@ bool Simulator::try_dynamic_step(double dt) {
   }
 
   // Forces at x: elastic, K v, gravity.
+  using Clock = std::chrono::steady_clock;
+  auto lap = [t = Clock::now()]() mutable {
+    const auto now = Clock::now();
+    const double ms = std::chrono::duration<double, std::milli>(now - t).count();
+    t = now;
+    return ms;
+  };
   ElementFrame frame;
   m_fem->rotations(m_state.x, frame);
+  m_profile.rotations = lap();
   VecX f_el, kv;
   m_fem->force_and_product(m_state.x, frame, v, f_el, kv);
+  m_profile.forces = lap();
 
   // (M + dt C + dt^2 K) dv = dt (f_ext + f_el - C v - dt K v), with C = alpha M + beta K.
   VecX rhs(3 * nd);
@@ -369,6 +379,7 @@ bool Simulator::try_dynamic_step(double dt) {
   rhs -= coupling;
   for (int d = 0; d < nd; ++d)
     if (m_constrained[std::size_t(d)]) rhs.segment<3>(3 * d) = dv_c.segment<3>(3 * d);
+  m_profile.assembly = lap();
 
   // Solve; the symbolic analysis is reused for the whole revision.
   if (!m_pattern_analyzed) {
@@ -381,6 +392,7 @@ bool Simulator::try_dynamic_step(double dt) {
   }
   VecX dv = m_dv_prev;
   m_last_solve = m_solver->solve(rhs, dv);
+  m_profile.solve = lap();
   if (!m_last_solve.ok) {
     ++m_stats.solver_failures;
     return false;
@@ -418,8 +430,7 @@ bool Simulator::try_dynamic_step(double dt) {
 void Simulator::step() {
   const double dt = m_options.dt;
   if (!m_options.dynamic) {
-    if (!solve_static(m_state.t + dt)) ++m_stats.newton_unconverged;
-    m_state.t += dt;
+    if (!solve_static(m_state.t + dt)) ++m_stats.newton_unconverged;  // sets t
     return;
   }
   const SimState start = m_state;

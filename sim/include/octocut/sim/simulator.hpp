@@ -35,6 +35,14 @@ struct StabilityStats {
   double max_speed = 0.0;    ///< largest DOF speed seen, m/s
 };
 
+/// Where the time of the last step went, ms (dynamic steps).
+struct StepProfile {
+  double rotations = 0.0;  ///< polar decompositions
+  double forces = 0.0;     ///< elastic force and K v
+  double assembly = 0.0;   ///< rotated element stiffness and scatter into the system matrix
+  double solve = 0.0;      ///< linear solve (factorisation or pcg)
+};
+
 /// Per-element corotational data at one configuration.
 struct ElementFrame {
   std::vector<Mat3> rotation;  ///< R of each element (num_elements)
@@ -110,6 +118,8 @@ class Simulator {
   [[nodiscard]] double max_speed() const;
   /// Total iterations of the last linear solve (pcg) and whether it refactorised.
   [[nodiscard]] const SolveInfo& last_solve() const { return m_last_solve; }
+  /// Time spent in the parts of the last dynamic step attempt.
+  [[nodiscard]] const StepProfile& profile() const { return m_profile; }
 
  private:
   bool try_dynamic_step(double dt);
@@ -120,6 +130,7 @@ class Simulator {
   SimState m_state;
   StabilityStats m_stats;
   SolveInfo m_last_solve;
+  StepProfile m_profile;
   std::unique_ptr<Executor> m_executor;
   std::unique_ptr<FemSystem> m_fem;
   std::unique_ptr<LinearSolver> m_solver;

@@ -1,0 +1,38 @@
+#pragma once
+// The world: builds the simulation of a scene and runs its timeline, writing report.json (SPEC §5, §8).
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "octocut/engine/scene.hpp"
+#include "octocut/sim/simulator.hpp"
+
+namespace octocut::engine {
+
+/// Builds the object model of a scene: the octree root (given, or the material's bounding box made cubic and grown
+/// by 5%), base level, refine regions and handles. Throws SceneError for inputs that only fail once built
+/// (for example a probe outside the material).
+sim::ObjectModel build_object(const Scene& scene);
+
+/// The simulator options a scene asks for.
+sim::SimulatorOptions simulator_options(const Scene& scene);
+
+/// How `octocut run` runs a scene.
+struct RunOptions {
+  std::string out_dir = "out";  ///< report.json and outputs go here (created if missing)
+  bool no_render = false;       ///< never touch EGL, whatever the scene says
+  bool progress = false;        ///< print a progress line to stderr
+};
+
+/// What a run ended with.
+struct RunResult {
+  int exit_code = 0;        ///< 0 ok, 1 the run failed (report written), 2 bad input
+  std::string report_path;  ///< where report.json was written
+  std::string error;        ///< the failure, when exit_code != 0
+};
+
+/// Runs a loaded scene to its duration and writes DIR/report.json atomically, also when the run fails part-way.
+/// Bad input that is only detected while building (exit 2) is returned, not thrown.
+RunResult run_scene(const Scene& scene, const RunOptions& options);
+
+}  // namespace octocut::engine

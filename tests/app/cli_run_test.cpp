@@ -1,0 +1,166 @@
+// `octocut run` end to end: the shipped cantilever against beam theory, bit-identical reports, a run stopped
+// part-way still writes a failed report, rendering without a renderer is bad input, usage errors exit 2.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <thread>
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+struct CommandResult {
+  int exit_code = -1;
+  std::string output;
+};
+
+CommandResult run_octocut(const std::string& arguments) {
+  const std::string command = std::string("'") + OCTOCUT_EXE + "' " + arguments + " 2>&1";
+  CommandResult result;
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (pipe == nullptr) return result;
+  char buffer[4096];
+  while (const std::size_t count = std::fread(buffer, 1, sizeof buffer, pipe)) result.output.append(buffer, count);
+  const int status = ::pclose(pipe);
+  if (status != -1 && WIFEXITED(status)) result.exit_code = WEXITSTATUS(status);
+  return result;
+}
+
+json read_json(const fs::path& p) {
+  std::ifstream in(p);
+  return json::parse(in);
+}
+
+class CliRunTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const std::string test = ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    m_dir = fs::temp_directory_path() / ("octocut_run_test_" + std::to_string(::getpid()) + "_" + test);
+    fs::remove_all(m_dir);
+    fs::create_directories(m_dir);
+  }
+  void TearDown() override { fs::remove_all(m_dir); }
+  fs::path write(const std::string& name, const std::string& text) {
+    const fs::path p = m_dir / name;
+    std::ofstream(p) << text;
+    return p;
+  }
+  fs::path m_dir;
+};
+
+const char* kCube = R"({
+  "name": "cube", "duration": 0.05,
+  "solver": {"dt": 0.001, "threads": 2},
+  "object": {"surface": {"box": {"min": [0, 0, 0], "max": [0.01, 0.01, 0.01]}},
+             "material": {"young_modulus": 5e4, "poisson_ratio": 0.45},
+             "octree": {"root": {"min": [0, 0, 0], "size": 0.016}, "base_level": 4},
+             "handles": [{"box": {"min": [-1, -1, -1], "max": [1, 1, 1e-9]}}]},
+  "probes": [{"name": "top", "point": [0.005, 0.005, 0.01]}]
+})";
+
+TEST_F(CliRunTest, CantileverTipLiesBetweenBeamTheories) {
+  const std::string scene = std::string(OCTOCUT_SOURCE_DIR) + "/assets/scenes/cantilever.json";
+  const CommandResult r = run_octocut("run '" + scene + "' --quiet --out '" + (m_dir / "out").string() + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json rep = read_json(m_dir / "out/report.json");
+  EXPECT_EQ(rep["schema"], "octocut.report/1");
+  EXPECT_EQ(rep["status"], "ok");
+  EXPECT_GT(rep["counts"]["hanging_slots"].get<int>(), 0);
+  // q L^4 / (8 E I) and the Timoshenko shear correction for the 0.1 x 0.02 x 0.02 m beam, E = 1e7, nu = 0.3.
+  const double q = 1000 * 9.81 * 4e-4, I = std::pow(0.02, 4) / 12, eb = q * 1e-4 / (8 * 1e7 * I);
+  const double timo = eb + q * 0.01 / (2 * (5.0 / 6.0) * (1e7 / 2.6) * 4e-4);
+  const double tip = -rep["probes"]["tip"]["displacement"][2].get<double>();
+  EXPECT_GT(tip, eb);
+  EXPECT_LT(tip, timo);
+  EXPECT_TRUE(rep["stability"]["finite"].get<bool>());
+}
+
+TEST_F(CliRunTest, SameSceneGivesBitIdenticalReportsApartFromTimings) {
+  const fs::path scene = write("cube.json", kCube);
+  auto run = [&](const std::string& out) {
+    const CommandResult r = run_octocut("run '" + scene.string() + "' --quiet --out '" + (m_dir / out).string() + "'");
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    json rep = read_json(m_dir / out / "report.json");
+    rep.erase("timing_ms");
+    rep.erase("wall_time_s");
+    return rep.dump();
+  };
+  const std::string a = run("a"), b = run("b");
+  EXPECT_EQ(a, b);
+  EXPECT_NE(a.find("\"top\""), std::string::npos);
+}
+
+TEST_F(CliRunTest, OverridesChangeTheRun) {
+  const fs::path scene = write("cube.json", kCube);
+  const CommandResult r = run_octocut("run '" + scene.string() + "' --quiet --set /duration=0.01 --set /name=renamed --out '" +
+                                      (m_dir / "o").string() + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json rep = read_json(m_dir / "o/report.json");
+  EXPECT_EQ(rep["steps"].get<int>(), 10);
+  EXPECT_EQ(rep["name"], "renamed");
+}
+
+TEST_F(CliRunTest, InterruptedRunWritesAFailedReport) {
+  const fs::path scene = write("long.json", kCube);
+  const fs::path out = m_dir / "out";
+  const pid_t pid = ::fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    ::execl(OCTOCUT_EXE, OCTOCUT_EXE, "run", scene.c_str(), "--quiet", "--set", "/duration=1000", "--out", out.c_str(),
+            static_cast<char*>(nullptr));
+    std::_Exit(127);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  ::kill(pid, SIGTERM);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 1);
+  const json rep = read_json(out / "report.json");
+  EXPECT_EQ(rep["status"], "failed");
+  EXPECT_NE(rep["error"].get<std::string>().find("interrupted"), std::string::npos);
+  EXPECT_GT(rep["steps"].get<int>(), 0);
+  // Nothing but the report is left: no temporary file.
+  int files = 0;
+  for (const auto& e : fs::directory_iterator(out)) files += e.is_regular_file() ? 1 : 0;
+  EXPECT_EQ(files, 1);
+}
+
+TEST_F(CliRunTest, RenderingWithoutARendererIsBadInputUnlessNoRender) {
+  const fs::path scene = write("render.json", kCube);
+  const CommandResult r = run_octocut("run '" + scene.string() + "' --quiet --set /render/enabled=true --out '" +
+                                      (m_dir / "r").string() + "'");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find("/render/enabled"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(m_dir / "r/report.json"));
+  const CommandResult ok = run_octocut("run '" + scene.string() + "' --quiet --no-render --set /render/enabled=true "
+                                       "--set /duration=0.002 --out '" + (m_dir / "n").string() + "'");
+  EXPECT_EQ(ok.exit_code, 0) << ok.output;
+}
+
+TEST_F(CliRunTest, ProbeOutsideTheMaterialIsBadInput) {
+  const fs::path scene = write("probe.json", kCube);
+  const CommandResult r = run_octocut("validate '" + scene.string() + "' --set '/probes/0/point=[0.5,0.5,0.5]'");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find("probe.json: /probes/0/point: outside the object's material"), std::string::npos) << r.output;
+}
+
+TEST_F(CliRunTest, UsageErrorsExitTwo) {
+  EXPECT_EQ(run_octocut("").exit_code, 2);
+  EXPECT_EQ(run_octocut("frobnicate").exit_code, 2);
+  EXPECT_EQ(run_octocut("run").exit_code, 2);
+  EXPECT_EQ(run_octocut("bench no-such-benchmark --quiet").exit_code, 2);
+  EXPECT_EQ(run_octocut("--help").exit_code, 0);
+}
+
+}  // namespace

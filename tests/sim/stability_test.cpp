@@ -1,0 +1,66 @@
+// Issue 2 stability matrix on the 1 cm cube of 10 x 10 x 10 leaves: stiff, nearly incompressible, huge steps, a
+// crush to 5% of the height, and a 360 degree twist all stay finite and bounded.
+#include <gtest/gtest.h>
+
+#include "test_util.hpp"
+
+namespace octocut::sim {
+namespace {
+
+struct Case {
+  double young = 5e4, nu = 0.45, dt = 1e-3, duration = 0.1;
+  std::vector<HandleKeyframe> top;  // keyframes of a handle on the top face (none: top free)
+};
+
+void expect_stable(const Case& c) {
+  MaterialParams p;
+  p.young_modulus = c.young;
+  p.poisson_ratio = c.nu;
+  std::vector<HandleSpec> handles{{{Vec3(-1, -1, -1), Vec3(1, 1, 1e-9)}, {}}};
+  if (!c.top.empty()) handles.push_back({{Vec3(-1, -1, 0.01 - 1e-9), Vec3(1, 1, 1)}, c.top});
+  const ObjectModel m = test::box_model({Vec3(0, 0, 0), Vec3(0.01, 0.01, 0.01)}, Vec3(0, 0, 0), 0.016, 4, {},
+                                        handles, p);
+  ASSERT_EQ(m.num_elements(), 1000);
+  SimulatorOptions o;
+  o.dt = c.dt;
+  o.tolerance = 1e-6;
+  o.max_iterations = 500;
+  Simulator sim(m, o);
+  const int steps = int(std::lround(c.duration / c.dt));
+  double max_extent = 0.0;
+  for (int i = 0; i < steps; ++i) {
+    sim.step();
+    for (const Vec3& x : sim.state().x) {
+      ASSERT_TRUE(x.allFinite()) << "step " << i;
+      max_extent = std::max(max_extent, (x - Vec3(0.005, 0.005, 0.005)).norm());
+    }
+  }
+  // Bounded: nothing leaves a 5 cm ball around the cube centre, speeds stay under the guard's limit.
+  EXPECT_LT(max_extent, 0.05);
+  EXPECT_LE(sim.max_speed(), o.max_speed);
+  std::printf("recoveries %d, failed steps %d, max speed %.3g m/s, max extent %.3g m\n", sim.stats().recoveries,
+              sim.stats().failed_steps, sim.stats().max_speed, max_extent);
+}
+
+TEST(Stability, StiffMaterial) { expect_stable({.young = 1e9}); }
+TEST(Stability, NearlyIncompressible) { expect_stable({.nu = 0.499}); }
+TEST(Stability, HugeTimeStep) { expect_stable({.dt = 0.05, .duration = 1.0}); }
+
+TEST(Stability, CrushToFivePercentOfHeight) {
+  Case c;
+  c.dt = 5e-3;
+  c.duration = 0.6;
+  c.top = {{0.5, Vec3(0, 0, -0.0095), Vec3::Zero()}};
+  expect_stable(c);
+}
+
+TEST(Stability, TwistTopFaceByFullTurn) {
+  Case c;
+  c.dt = 5e-3;
+  c.duration = 1.0;
+  c.top = {{1.0, Vec3::Zero(), Vec3(0, 0, 360)}};
+  expect_stable(c);
+}
+
+}  // namespace
+}  // namespace octocut::sim

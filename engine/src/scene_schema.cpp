@@ -142,11 +142,13 @@ Entry make_scene_schema() {
       "solver",
       {
           choice("mode", {"dynamic", "static"}, "dynamic",
-                 "`dynamic` integrates the equations of motion in time; `static` solves for equilibrium at each step."),
+                 "`dynamic` integrates the equations of motion in time; `static` solves for equilibrium at each step (load steps of `dt` up to `duration`)."),
           number("dt", 1e-3, open_closed(0, 1), "Time step, s."),
           vec3("gravity", std::array{0.0, 0.0, -9.81}, "Gravitational acceleration, m/s^2."),
           choice("linear_solver", {"cholmod", "pcg"}, "pcg",
-                 "Linear solver: `cholmod` (sparse Cholesky) or `pcg` (Jacobi-preconditioned conjugate gradients)."),
+                 "Linear solver: `cholmod` (supernodal Cholesky, factorised every step) or `pcg` (warm-started "
+                 "conjugate gradients preconditioned by a lagged Cholesky factor that is refreshed when convergence "
+                 "slows)."),
           number("tolerance", 1e-6, open(0, 1), "Relative residual at which iterative solves stop (dimensionless)."),
           integer("max_iterations", 200, closed(1, 100000),
                   "Iteration limit per linear solve (pcg) or per static solve (Newton)."),
@@ -176,7 +178,7 @@ Entry make_scene_schema() {
                           "Root cube of the octree; when absent it is derived from the object's bounds.")),
           integer("base_level", 3, closed(0, 20), "Level to which the object is refined uniformly at the start."),
           integer("max_level", 8, closed(0, 20), "Deepest level any refinement may reach; at least `base_level`."),
-          boolean("uniform", false, "Refine uniformly, with no adaptivity."),
+          boolean("uniform", false, "Build the whole object at `max_level`, with no adaptivity (uniform-grid comparisons)."),
           object_array("refine",
                        {box("box", "Every leaf overlapping this box is refined, m."),
                         required(integer("level", std::nullopt, closed(0, 20),
@@ -192,7 +194,7 @@ Entry make_scene_schema() {
           vec3("translation", std::array{0.0, 0.0, 0.0}, "Translation of the box, m."),
           vec3("rotation_deg", std::array{0.0, 0.0, 0.0}, "XYZ Euler angles about the box centre, degrees."),
       },
-      "Rigid motion, interpolated linearly and held after the last keyframe; none: the handle is fixed.");
+      "Rigid motion, interpolated linearly from the rest pose at t = 0 and held after the last keyframe; none: the handle is fixed.");
 
   Entry object_entry = required(object(
       "object",

@@ -87,10 +87,15 @@ Vec24 corotated_force(const Mat24& K, const Mat3& R, const Vec24& x, const Vec24
 }
 
 Mat24 corotated_stiffness(const Mat24& K, const Mat3& R) {
+  // K is symmetric, so block (b, a) of R K R^T is the transpose of block (a, b): compute the upper blocks only.
   Mat24 out;
-  for (int a = 0; a < 8; ++a)
-    for (int b = 0; b < 8; ++b)
-      out.block<3, 3>(3 * a, 3 * b).noalias() = R * K.block<3, 3>(3 * a, 3 * b) * R.transpose();
+  for (int a = 0; a < 8; ++a) {
+    for (int b = a; b < 8; ++b) {
+      const Mat3 blk = R * K.block<3, 3>(3 * a, 3 * b) * R.transpose();
+      out.block<3, 3>(3 * a, 3 * b) = blk;
+      if (b != a) out.block<3, 3>(3 * b, 3 * a) = blk.transpose();
+    }
+  }
   return out;
 }
 

@@ -1,6 +1,7 @@
 #include "octocut/sim/object.hpp"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
@@ -153,8 +154,9 @@ void ObjectModel::finish() {
     for (int k = 0; k < 8; ++k) m_slot_rest[8 * std::size_t(e) + std::size_t(k)] = m_root.to_world(c.corner(k));
   }
 
-  // DOFs by node splitting and hard binding.
+  // DOFs by node splitting and hard binding; debug builds check the invariants of SPEC §2.3 on every revision.
   m_dofs = build_dof_map(m_tree, m_root, *m_material);
+  assert(m_dofs.check_invariants().empty());
 
   // Lumped mass rho phi h^3 / 8 per slot, gathered to DOFs through P^T.
   m_dof_mass.assign(std::size_t(m_dofs.num_dofs), 0.0);

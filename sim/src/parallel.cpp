@@ -5,6 +5,8 @@
 #include <tbb/partitioner.h>
 #include <tbb/task_arena.h>
 
+#include <dlfcn.h>
+
 #include <algorithm>
 #include <thread>
 
@@ -18,6 +20,10 @@ struct Executor::Impl {
 Executor::Executor(int threads) {
   m_threads = threads > 0 ? threads : std::max(1, int(std::thread::hardware_concurrency()));
   if (m_threads > 1) m_impl = std::make_unique<Impl>(m_threads);
+  // The BLAS behind CHOLMOD (OpenBLAS on Debian) starts its own threads: cap them at the same count so the two never
+  // oversubscribe. Looked up at run time, so any BLAS works and none is linked directly.
+  using SetThreads = void (*)(int);
+  if (auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) set(m_threads);
 }
 
 Executor::~Executor() = default;

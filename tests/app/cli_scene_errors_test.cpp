@@ -103,4 +103,26 @@ TEST_F(CliSceneErrorsTest, MissingMeshFileExitsTwoWithPointer) {
       << result.output;
 }
 
+TEST_F(CliSceneErrorsTest, WrongTypeExitsTwoWithPointer) {
+  const std::string path = write(
+      "type.json", R"({"solver": {"dt": "fast"}, "object": {"surface": {"box": {"min": [0, 0, 0], "max": [1, 1, 1]}}}})");
+  const CommandResult result = validate(path);
+  EXPECT_EQ(result.exit_code, 2) << result.output;
+  EXPECT_NE(result.output.find(path + ": /solver/dt: "), std::string::npos) << result.output;
+  EXPECT_NE(result.output.find("number"), std::string::npos) << result.output;
+}
+
+TEST_F(CliSceneErrorsTest, NonFiniteNumberExitsTwoWithPointer) {
+  const std::string path =
+      write("inf.json", R"({"duration": 1e999, "object": {"surface": {"box": {"min": [0, 0, 0], "max": [1, 1, 1]}}}})");
+  const CommandResult result = validate(path);
+  EXPECT_EQ(result.exit_code, 2) << result.output;
+  EXPECT_NE(result.output.find(path + ":"), std::string::npos) << result.output;
+  // The same through an override names the pointer.
+  const std::string ok = write("ok.json", R"({"object": {"surface": {"box": {"min": [0, 0, 0], "max": [1, 1, 1]}}}})");
+  const CommandResult over = run_octocut("validate '" + ok + "' --set /solver/dt=1e999");
+  EXPECT_EQ(over.exit_code, 2) << over.output;
+  EXPECT_NE(over.output.find("/solver/dt: must be a finite number"), std::string::npos) << over.output;
+}
+
 }  // namespace

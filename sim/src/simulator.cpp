@@ -434,7 +434,8 @@ void Simulator::step() {
     return;
   }
   const SimState start = m_state;
-  // Attempts at dt, then halves recursively up to max_halvings; any failure restores the start of the sub-step.
+  // An attempt that fails is rolled back and its interval retried as two halves, each of which may halve again,
+  // down to dt / 2^max_halvings.
   std::function<bool(double, int)> advance = [&](double h, int depth) {
     const SimState before = m_state;
     if (try_dynamic_step(h)) return true;
@@ -443,12 +444,9 @@ void Simulator::step() {
     if (depth >= m_options.max_halvings) return false;
     return advance(0.5 * h, depth + 1) && advance(0.5 * h, depth + 1);
   };
-  const SimState before = m_state;
-  if (try_dynamic_step(dt)) return;
-  m_state = before;
-  m_dv_prev.setZero();
-  if (m_options.max_halvings > 0 && advance(0.5 * dt, 1) && advance(0.5 * dt, 1)) {
-    ++m_stats.recoveries;
+  const int failures_before = m_stats.nonfinite + m_stats.speed_limit + m_stats.solver_failures;
+  if (advance(dt, 0)) {
+    if (m_stats.nonfinite + m_stats.speed_limit + m_stats.solver_failures > failures_before) ++m_stats.recoveries;
     return;
   }
   // Defined reset: positions of the step's start, velocities zero, handles at their pose at t + dt.

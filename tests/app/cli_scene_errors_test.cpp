@@ -9,28 +9,14 @@
 #include <fstream>
 #include <string>
 
+#include "cli_util.hpp"
+
 namespace {
 
 namespace fs = std::filesystem;
 
-/// The exit status and the combined stdout and stderr of one command.
-struct CommandResult {
-  int exit_code = -1;  ///< -1 when the process did not exit normally
-  std::string output;
-};
-
-/// Runs `octocut <arguments>` through the shell, capturing stderr with stdout.
-CommandResult run_octocut(const std::string& arguments) {
-  const std::string command = std::string("'") + OCTOCUT_EXE + "' " + arguments + " 2>&1";
-  CommandResult result;
-  FILE* pipe = ::popen(command.c_str(), "r");
-  if (pipe == nullptr) return result;
-  char buffer[4096];
-  while (const std::size_t count = std::fread(buffer, 1, sizeof buffer, pipe)) result.output.append(buffer, count);
-  const int status = ::pclose(pipe);
-  if (status != -1 && WIFEXITED(status)) result.exit_code = WEXITSTATUS(status);
-  return result;
-}
+using octocut::test::CommandResult;
+using octocut::test::run_octocut;
 
 /// Gives each test a fresh directory for its scene files, removed afterwards.
 class CliSceneErrorsTest : public ::testing::Test {

@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
-#include <map>
 #include <sstream>
 #include <stdexcept>
 #include <unordered_map>
@@ -170,37 +169,53 @@ DofMap build_dof_map(const Octree& tree, const RootGeometry& root, const Materia
     if (!assigned[std::size_t(s)]) throw std::logic_error("build_dof_map: a slot was not reached by its node");
   }
 
-  // Resolve chains of hanging slots coarse-to-fine: a master is always strictly coarser than the bound slot's leaf.
-  std::vector<std::vector<std::pair<int, double>>> rows(static_cast<std::size_t>(num_slots));
-  std::vector<char> done(static_cast<std::size_t>(num_slots), 0);
-  std::function<void(int, int)> resolve = [&](int s, int depth) {
-    if (done[std::size_t(s)]) return;
+  // Resolve chains of hanging slots: a master is always strictly coarser than the bound slot's leaf, so the
+  // recursion ends. Only hanging rows are memoised; a DOF slot's row is (dof, 1).
+  using Row = std::vector<std::pair<int, double>>;
+  std::unordered_map<int, Row> hanging_rows;
+  std::function<const Row&(int, int)> resolve_hanging = [&](int s, int depth) -> const Row& {
+    if (auto it = hanging_rows.find(s); it != hanging_rows.end()) return it->second;
     if (depth > kMaxDepth + 1) throw std::logic_error("build_dof_map: cyclic hard binding");
     const SlotBinding& b = binding[std::size_t(s)];
-    auto& row = rows[std::size_t(s)];
-    if (b.dof >= 0) {
-      row.emplace_back(b.dof, 1.0);
-    } else {
-      std::map<int, double> acc;
-      for (int k = 0; k < 8; ++k) {
-        const double w = b.weights[std::size_t(k)];
-        if (w == 0.0) continue;
-        const int ms = 8 * b.master + k;
-        resolve(ms, depth + 1);
-        for (const auto& [d, wd] : rows[std::size_t(ms)]) acc[d] += w * wd;
+    Row acc;
+    for (int k = 0; k < 8; ++k) {
+      const double w = b.weights[std::size_t(k)];
+      if (w == 0.0) continue;
+      const int ms = 8 * b.master + k;
+      const SlotBinding& mb = binding[std::size_t(ms)];
+      if (mb.dof >= 0) {
+        acc.emplace_back(mb.dof, w);
+      } else {
+        for (const auto& [d, wd] : resolve_hanging(ms, depth + 1)) acc.emplace_back(d, w * wd);
       }
-      for (const auto& [d, w] : acc)
-        if (w != 0.0) row.emplace_back(d, w);
     }
-    done[std::size_t(s)] = 1;
+    // Merge the entries of each DOF, in DOF order.
+    std::sort(acc.begin(), acc.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    Row row;
+    for (const auto& [d, w] : acc) {
+      if (!row.empty() && row.back().first == d)
+        row.back().second += w;
+      else
+        row.emplace_back(d, w);
+    }
+    std::erase_if(row, [](const auto& e) { return e.second == 0.0; });
+    return hanging_rows.emplace(s, std::move(row)).first->second;
   };
+  map.slot_begin.reserve(std::size_t(num_slots) + 1);
+  map.slot_dof.reserve(std::size_t(num_slots));
+  map.slot_weight.reserve(std::size_t(num_slots));
   map.slot_begin.assign(1, 0);
   for (int s = 0; s < num_slots; ++s) {
-    resolve(s, 0);
-    if (binding[std::size_t(s)].dof < 0) ++map.hanging_slots;
-    for (const auto& [d, w] : rows[std::size_t(s)]) {
-      map.slot_dof.push_back(d);
-      map.slot_weight.push_back(w);
+    const SlotBinding& b = binding[std::size_t(s)];
+    if (b.dof >= 0) {
+      map.slot_dof.push_back(b.dof);
+      map.slot_weight.push_back(1.0);
+    } else {
+      ++map.hanging_slots;
+      for (const auto& [d, w] : resolve_hanging(s, 0)) {
+        map.slot_dof.push_back(d);
+        map.slot_weight.push_back(w);
+      }
     }
     map.slot_begin.push_back(int(map.slot_dof.size()));
   }

@@ -66,7 +66,13 @@ sim::ObjectModel build_object(const Scene& scene) {
   }
   sim::MaterialParams params{o.material.young_modulus, o.material.poisson_ratio, o.material.density,
                              o.material.rayleigh_mass, o.material.rayleigh_stiffness};
-  sim::ObjectModel model = sim::ObjectModel::build(spec, material, params, std::move(handles));
+  sim::ObjectModel model = [&] {
+    try {
+      return sim::ObjectModel::build(spec, material, params, std::move(handles));
+    } catch (const std::invalid_argument& e) {
+      throw SceneError(scene.file + ": /object/octree: " + e.what());
+    }
+  }();
 
   // Probes must lie in material.
   for (std::size_t i = 0; i < scene.probes.size(); ++i) {
@@ -109,10 +115,6 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
   } catch (const SceneError& e) {
     result.exit_code = 2;
     result.error = e.what();
-    return result;
-  } catch (const std::invalid_argument& e) {
-    result.exit_code = 2;
-    result.error = scene.file + ": /object: " + e.what();
     return result;
   }
   std::error_code ec;

@@ -13,6 +13,8 @@ using Cholmod = Eigen::CholmodSupernodalLLT<SpMat, Eigen::Lower>;
 // Direct solver: supernodal LL^T; the symbolic analysis is reused until the pattern changes.
 class CholmodSolver final : public LinearSolver {
  public:
+  // A failed factorisation is reported through SolveInfo and counted by the caller, not printed by CHOLMOD.
+  CholmodSolver() { m_llt.cholmod().print = 0; }
   void analyze_pattern(const SpMat& A) override { m_llt.analyzePattern(A); }
   bool factorize(const SpMat& A) override {
     m_llt.factorize(A);
@@ -44,6 +46,7 @@ class CholmodSolver final : public LinearSolver {
 class PcgSolver final : public LinearSolver {
  public:
   explicit PcgSolver(const LinearSolverOptions& o) : m_opt(o), m_use_cholesky(o.preconditioner != "jacobi") {
+    m_llt.cholmod().print = 0;
     if (o.preconditioner != "jacobi" && o.preconditioner != "cholesky")
       throw std::invalid_argument("unknown preconditioner '" + o.preconditioner + "'");
   }

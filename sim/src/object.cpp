@@ -98,6 +98,10 @@ ObjectModel ObjectModel::build(const OctreeSpec& spec, std::shared_ptr<const Mat
       for (int k = 7; k >= 0; --k) stack.push_back(c.child(k));
     } else {
       leaves.push_back({c, occ});
+      // Refuse runaway levels before memory runs out: a bad level in a scene must be an error, not a hang.
+      if (leaves.size() > kMaxElements)
+        throw std::invalid_argument("the octree would exceed " + std::to_string(kMaxElements) +
+                                    " elements; lower base_level or the refine levels");
     }
   }
   if (leaves.empty()) throw std::invalid_argument("ObjectModel::build: the material does not meet the octree root");

@@ -143,6 +143,16 @@ TEST_F(CliRunTest, ProbeOutsideTheMaterialIsBadInput) {
   EXPECT_NE(r.output.find("probe.json: /probes/0/point: outside the object's material"), std::string::npos) << r.output;
 }
 
+TEST_F(CliRunTest, RunawayOctreeLevelIsBadInputNotAHang) {
+  const fs::path scene = write("deep.json", kCube);
+  // Level 14 over the whole cube would be ~1.6e11 leaves.
+  const CommandResult r =
+      run_octocut("validate '" + scene.string() + "' --set /object/octree/max_level=14 --set /object/octree/base_level=14");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find("deep.json: /object/octree: the octree would exceed 1000000 elements"), std::string::npos)
+      << r.output;
+}
+
 TEST_F(CliRunTest, UsageErrorsExitTwo) {
   EXPECT_EQ(run_octocut("").exit_code, 2);
   EXPECT_EQ(run_octocut("frobnicate").exit_code, 2);

@@ -52,7 +52,8 @@ TEST(Octree, LeavesAreInMortonOrderAndLocateAgreesWithBruteForce) {
   for (int i = 1; i < tree.size(); ++i) ASSERT_LT(tree.leaf(i - 1).morton(), tree.leaf(i).morton());
   std::mt19937 rng(7);
   for (int i = 0; i < 5000; ++i) {
-    const GridPoint p{rng() % kGridCells, rng() % kGridCells, rng() % kGridCells};
+    const GridPoint p{std::uint32_t(rng() % kGridCells), std::uint32_t(rng() % kGridCells),
+                      std::uint32_t(rng() % kGridCells)};
     int brute = -1;
     for (int l = 0; l < tree.size(); ++l)
       if (tree.leaf(l).contains_cell(p)) brute = l;

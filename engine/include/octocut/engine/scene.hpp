@@ -1,6 +1,6 @@
 #pragma once
 // Scene description: the plain, validated data a scene file turns into (SPEC §5). No JSON types appear here; the
-// schema, the loader and the documentation generator live in scene_schema.hpp / scene_loader.cpp.
+// schema and the documentation generator live in engine/src/scene_schema.cpp, the loader in scene_loader.cpp.
 #include <array>
 #include <cstdint>
 #include <optional>
@@ -34,6 +34,7 @@ struct RefineRegion {
   int level = 0;
 };
 
+/// Isotropic linear elastic material with Rayleigh damping (`object.material`).
 struct Material {
   double young_modulus = 1e5;      ///< E, Pa
   double poisson_ratio = 0.3;      ///< nu, dimensionless, [0, 0.5)
@@ -42,6 +43,7 @@ struct Material {
   double rayleigh_stiffness = 0.0; ///< beta, s
 };
 
+/// How the simulation octree is built (`object.octree`).
 struct OctreeSettings {
   bool has_root = false;            ///< true when `octree.root` is given
   std::array<double, 3> root_min{}; ///< root cube lower corner, m (3)
@@ -52,6 +54,7 @@ struct OctreeSettings {
   std::vector<RefineRegion> refine; ///< static refinement regions
 };
 
+/// The deformable object (`object`).
 struct ObjectSettings {
   bool surface_is_box = true;  ///< true: `surface` is {"box": …}; false: a mesh path
   SceneBox surface_box;        ///< when surface_is_box, m
@@ -63,6 +66,7 @@ struct ObjectSettings {
   std::vector<Handle> handles;
 };
 
+/// Time integration and linear solver (`solver`).
 struct SolverSettings {
   std::string mode = "dynamic";            ///< "dynamic" | "static"
   double dt = 1e-3;                        ///< s
@@ -74,15 +78,18 @@ struct SolverSettings {
   double max_speed = 100.0;                ///< m/s; a guard: faster DOFs roll the step back
 };
 
+/// A rest-space point whose displacement the report records (`probes[]`).
 struct Probe {
   std::string name;
   std::array<double, 3> point{};  ///< rest-space point, m (3)
 };
 
+/// Off-screen rendering (`render`).
 struct RenderSettings {
   bool enabled = false;
 };
 
+/// Files written besides the report (`output`).
 struct OutputSettings {
   bool frames = false;
   bool surface_final = false;

@@ -3,6 +3,7 @@
 // producing a new revision (refinement, and from the cutting issue on, cuts); the simulation state lives apart in
 // SimState.
 #include <array>
+#include <cstddef>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -44,6 +45,10 @@ struct RefineSpec {
   Box3 box;
   int level = 0;
 };
+
+/// Most elements one object may have (the assembly keeps about 6 KB per element); building a larger octree fails
+/// with std::invalid_argument.
+inline constexpr std::size_t kMaxElements = 1'000'000;
 
 /// How to build an object's octree.
 struct OctreeSpec {

@@ -70,107 +70,110 @@ std::optional<std::pair<Box3, int>> common_face(const Cell& a, const Cell& b, co
   return std::make_pair(face, axis);
 }
 
-DofMap build_dof_map(const Octree& tree, const RootGeometry& root, const MaterialSource& material) {
-  const int num_leaves = tree.size();
-  const int num_slots = 8 * num_leaves;
+namespace {
 
-  // Logical nodes: the distinct corners of all leaves, sorted by key.
-  std::vector<std::uint64_t> nodes;
-  nodes.reserve(std::size_t(num_slots));
-  for (const Cell& c : tree.leaves())
-    for (int k = 0; k < 8; ++k) nodes.push_back(node_key(c.corner(k)));
-  std::sort(nodes.begin(), nodes.end());
-  nodes.erase(std::unique(nodes.begin(), nodes.end()), nodes.end());
-
-  // Face connectivity of leaf pairs, cached: many nodes ask about the same pair.
-  std::unordered_map<std::uint64_t, bool> connected_cache;
-  auto connected = [&](int a, int b) {
+// Face connectivity of leaf pairs, cached: many nodes ask about the same pair.
+class ConnectivityCache {
+ public:
+  ConnectivityCache(const Octree& tree, const RootGeometry& root, const MaterialSource& material)
+      : m_tree(tree), m_root(root), m_material(material) {}
+  bool operator()(int a, int b) {
     if (a > b) std::swap(a, b);
     const std::uint64_t key = (std::uint64_t(std::uint32_t(a)) << 32) | std::uint32_t(b);
-    auto it = connected_cache.find(key);
-    if (it != connected_cache.end()) return it->second;
-    const auto face = common_face(tree.leaf(a), tree.leaf(b), root);
-    const bool c = face && material.face_connected(face->first, face->second);
-    connected_cache.emplace(key, c);
+    auto it = m_cache.find(key);
+    if (it != m_cache.end()) return it->second;
+    const auto face = common_face(m_tree.leaf(a), m_tree.leaf(b), m_root);
+    const bool c = face && m_material.face_connected(face->first, face->second);
+    m_cache.emplace(key, c);
     return c;
-  };
+  }
 
-  DofMap map;
-  std::vector<SlotBinding> binding(static_cast<std::size_t>(num_slots));
-  std::vector<char> assigned(static_cast<std::size_t>(num_slots), 0);
+ private:
+  const Octree& m_tree;
+  const RootGeometry& m_root;
+  const MaterialSource& m_material;
+  std::unordered_map<std::uint64_t, bool> m_cache;
+};
 
-  for (const std::uint64_t key : nodes) {
-    const GridPoint n = node_from_key(key);
-    // The leaf covering each octant; octant bit d set = the octant lies on the + side of the node along d.
-    std::array<int, 8> leaf{};
-    for (int o = 0; o < 8; ++o) {
-      const bool px = o & 1, py = o & 2, pz = o & 4;
-      if ((!px && n.x == 0) || (!py && n.y == 0) || (!pz && n.z == 0) || (px && n.x == kGridCells) ||
-          (py && n.y == kGridCells) || (pz && n.z == kGridCells)) {
-        leaf[std::size_t(o)] = -1;
-        continue;
-      }
-      const GridPoint c{px ? n.x : n.x - 1, py ? n.y : n.y - 1, pz ? n.z : n.z - 1};
-      leaf[std::size_t(o)] = tree.locate_cell(c);
+// The leaves covering the 8 octants around node n (-1 where none); octant bit d set = the + side along d.
+std::array<int, 8> octant_leaves(const Octree& tree, const GridPoint& n) {
+  std::array<int, 8> leaf{};
+  for (int o = 0; o < 8; ++o) {
+    const bool px = o & 1, py = o & 2, pz = o & 4;
+    if ((!px && n.x == 0) || (!py && n.y == 0) || (!pz && n.z == 0) || (px && n.x == kGridCells) ||
+        (py && n.y == kGridCells) || (pz && n.z == kGridCells)) {
+      leaf[std::size_t(o)] = -1;
+      continue;
     }
+    leaf[std::size_t(o)] = tree.locate_cell({px ? n.x : n.x - 1, py ? n.y : n.y - 1, pz ? n.z : n.z - 1});
+  }
+  return leaf;
+}
 
-    // Graph G_i: same leaf, or face-adjacent octants whose leaves are connected.
-    OctantSets sets;
-    for (int o = 0; o < 8; ++o) {
-      const int lo = leaf[std::size_t(o)];
-      if (lo < 0) continue;
-      for (int p = o + 1; p < 8; ++p) {
-        const int lp = leaf[std::size_t(p)];
-        if (lp < 0) continue;
-        const int diff = o ^ p;
-        if (lo == lp) {
-          sets.unite(o, p);
-        } else if ((diff == 1 || diff == 2 || diff == 4) && connected(lo, lp)) {
-          sets.unite(o, p);
-        }
-      }
+// True when some leaf has n as a corner, i.e. n is a logical node of the tree.
+bool is_node(const Octree& tree, const GridPoint& n) {
+  const std::array<int, 8> leaf = octant_leaves(tree, n);
+  return std::any_of(leaf.begin(), leaf.end(), [&](int l) { return l >= 0 && tree.leaf(l).has_corner(n); });
+}
+
+// Node splitting at one logical node: appends its DOFs to `map` and sets the bindings of its slots.
+void process_node(std::uint64_t key, const Octree& tree, const RootGeometry& root, ConnectivityCache& connected,
+                  DofMap& map, std::vector<SlotBinding>& binding) {
+  const GridPoint n = node_from_key(key);
+  const std::array<int, 8> leaf = octant_leaves(tree, n);
+
+  // Graph G_i: same leaf, or face-adjacent octants whose leaves are connected.
+  OctantSets sets;
+  for (int o = 0; o < 8; ++o) {
+    const int lo = leaf[std::size_t(o)];
+    if (lo < 0) continue;
+    for (int p = o + 1; p < 8; ++p) {
+      const int lp = leaf[std::size_t(p)];
+      if (lp < 0) continue;
+      const int diff = o ^ p;
+      if (lo == lp || ((diff == 1 || diff == 2 || diff == 4) && connected(lo, lp))) sets.unite(o, p);
     }
+  }
 
-    // One DOF per component whose leaves all have the node as a corner; otherwise hard-bind to the coarsest leaf
-    // of the component that has the node inside a face or an edge.
-    for (int r = 0; r < 8; ++r) {
-      if (leaf[std::size_t(r)] < 0 || sets.find(r) != r) continue;
-      int master = -1;
-      for (int o = 0; o < 8; ++o) {
-        const int l = leaf[std::size_t(o)];
-        if (l < 0 || sets.find(o) != r || tree.leaf(l).has_corner(n)) continue;
-        if (master < 0 || tree.leaf(l).level < tree.leaf(master).level ||
-            (tree.leaf(l).level == tree.leaf(master).level && l < master))
-          master = l;
-      }
-      int dof = -1;
-      if (master < 0) {
-        dof = map.num_dofs++;
-        map.dof_rest.push_back(root.to_world(n));
-        map.dof_node.push_back(key);
-        map.dof_slot.push_back(-1);
-      }
-      for (int o = 0; o < 8; ++o) {
-        const int l = leaf[std::size_t(o)];
-        if (l < 0 || sets.find(o) != r || !tree.leaf(l).has_corner(n)) continue;
-        const std::size_t s = std::size_t(8 * l + (o ^ 7));
-        assigned[s] = 1;
-        if (dof >= 0) {
-          binding[s].dof = dof;
-          if (map.dof_slot[std::size_t(dof)] < 0) map.dof_slot[std::size_t(dof)] = int(s);
-        } else {
-          binding[s].master = master;
-          binding[s].weights = corner_weights(tree.leaf(master), n);
-        }
+  // One DOF per component whose leaves all have the node as a corner; otherwise hard-bind to the coarsest leaf of
+  // the component that has the node inside a face or an edge.
+  for (int r = 0; r < 8; ++r) {
+    if (leaf[std::size_t(r)] < 0 || sets.find(r) != r) continue;
+    int master = -1;
+    for (int o = 0; o < 8; ++o) {
+      const int l = leaf[std::size_t(o)];
+      if (l < 0 || sets.find(o) != r || tree.leaf(l).has_corner(n)) continue;
+      if (master < 0 || tree.leaf(l).level < tree.leaf(master).level ||
+          (tree.leaf(l).level == tree.leaf(master).level && l < master))
+        master = l;
+    }
+    int dof = -1;
+    if (master < 0) {
+      dof = map.num_dofs++;
+      map.dof_rest.push_back(root.to_world(n));
+      map.dof_node.push_back(key);
+      map.dof_slot.push_back(-1);
+    }
+    for (int o = 0; o < 8; ++o) {
+      const int l = leaf[std::size_t(o)];
+      if (l < 0 || sets.find(o) != r || !tree.leaf(l).has_corner(n)) continue;
+      const std::size_t s = std::size_t(8 * l + (o ^ 7));
+      binding[s] = SlotBinding{};
+      if (dof >= 0) {
+        binding[s].dof = dof;
+        if (map.dof_slot[std::size_t(dof)] < 0) map.dof_slot[std::size_t(dof)] = int(s);
+      } else {
+        binding[s].master = master;
+        binding[s].weights = corner_weights(tree.leaf(master), n);
       }
     }
   }
-  for (int s = 0; s < num_slots; ++s) {
-    if (!assigned[std::size_t(s)]) throw std::logic_error("build_dof_map: a slot was not reached by its node");
-  }
+}
 
-  // Resolve chains of hanging slots: a master is always strictly coarser than the bound slot's leaf, so the
-  // recursion ends. Only hanging rows are memoised; a DOF slot's row is (dof, 1).
+// Turns the slot bindings into the CSR rows of P, following chains of hard binding. A master is always strictly
+// coarser than the bound slot's leaf, so the recursion ends. Only hanging rows are memoised.
+void resolve_rows(const std::vector<SlotBinding>& binding, DofMap& map) {
+  const int num_slots = int(binding.size());
   using Row = std::vector<std::pair<int, double>>;
   std::unordered_map<int, Row> hanging_rows;
   std::function<const Row&(int, int)> resolve_hanging = [&](int s, int depth) -> const Row& {
@@ -201,24 +204,176 @@ DofMap build_dof_map(const Octree& tree, const RootGeometry& root, const Materia
     std::erase_if(row, [](const auto& e) { return e.second == 0.0; });
     return hanging_rows.emplace(s, std::move(row)).first->second;
   };
+  map.hanging_slots = 0;
+  map.slot_master.assign(std::size_t(num_slots), -1);
+  map.slot_begin.clear();
+  map.slot_dof.clear();
+  map.slot_weight.clear();
   map.slot_begin.reserve(std::size_t(num_slots) + 1);
   map.slot_dof.reserve(std::size_t(num_slots));
   map.slot_weight.reserve(std::size_t(num_slots));
-  map.slot_begin.assign(1, 0);
+  map.slot_begin.push_back(0);
   for (int s = 0; s < num_slots; ++s) {
     const SlotBinding& b = binding[std::size_t(s)];
     if (b.dof >= 0) {
       map.slot_dof.push_back(b.dof);
       map.slot_weight.push_back(1.0);
-    } else {
+    } else if (b.master >= 0) {
       ++map.hanging_slots;
+      map.slot_master[std::size_t(s)] = b.master;
       for (const auto& [d, w] : resolve_hanging(s, 0)) {
         map.slot_dof.push_back(d);
         map.slot_weight.push_back(w);
       }
+    } else {
+      throw std::logic_error("build_dof_map: a slot was not reached by its node");
     }
     map.slot_begin.push_back(int(map.slot_dof.size()));
   }
+}
+
+// Closed grid boxes of the cells whose DOFs must be recomputed, with their common bounding box for a quick reject.
+class DirtyRegion {
+ public:
+  void add(const Cell& c) {
+    const GridPoint lo = c.anchor, hi = c.corner(7);
+    m_boxes.push_back({lo, hi});
+    if (m_boxes.size() == 1) {
+      m_lo = lo;
+      m_hi = hi;
+    } else {
+      m_lo = {std::min(m_lo.x, lo.x), std::min(m_lo.y, lo.y), std::min(m_lo.z, lo.z)};
+      m_hi = {std::max(m_hi.x, hi.x), std::max(m_hi.y, hi.y), std::max(m_hi.z, hi.z)};
+    }
+  }
+  bool contains(const GridPoint& p) const {
+    auto inside = [&p](const GridPoint& lo, const GridPoint& hi) {
+      return p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z;
+    };
+    if (m_boxes.empty() || !inside(m_lo, m_hi)) return false;
+    return std::any_of(m_boxes.begin(), m_boxes.end(), [&](const auto& b) { return inside(b.first, b.second); });
+  }
+
+ private:
+  std::vector<std::pair<GridPoint, GridPoint>> m_boxes;
+  GridPoint m_lo, m_hi;
+};
+
+}  // namespace
+
+DofMap build_dof_map(const Octree& tree, const RootGeometry& root, const MaterialSource& material) {
+  const int num_slots = 8 * tree.size();
+
+  // Logical nodes: the distinct corners of all leaves, sorted by key.
+  DofMap map;
+  map.nodes.reserve(std::size_t(num_slots));
+  for (const Cell& c : tree.leaves())
+    for (int k = 0; k < 8; ++k) map.nodes.push_back(node_key(c.corner(k)));
+  std::sort(map.nodes.begin(), map.nodes.end());
+  map.nodes.erase(std::unique(map.nodes.begin(), map.nodes.end()), map.nodes.end());
+
+  // Node splitting node by node, in key order: DOFs are numbered by node, then by component.
+  ConnectivityCache connected(tree, root, material);
+  std::vector<SlotBinding> binding(static_cast<std::size_t>(num_slots));
+  map.node_dof_begin.reserve(map.nodes.size() + 1);
+  for (const std::uint64_t key : map.nodes) {
+    map.node_dof_begin.push_back(map.num_dofs);
+    process_node(key, tree, root, connected, map, binding);
+  }
+  map.node_dof_begin.push_back(map.num_dofs);
+  resolve_rows(binding, map);
+  return map;
+}
+
+DofMap update_dof_map(const DofMap& old, const Octree& old_tree, const Octree& tree, const RootGeometry& root,
+                      const MaterialSource& material, const std::vector<Cell>& material_changed) {
+  const int num_slots = 8 * tree.size();
+
+  // Leaves kept from the old tree (same cell, Morton order on both sides); removed and added leaves are dirty.
+  std::vector<int> old_to_new(std::size_t(old_tree.size()), -1);
+  std::vector<char> kept(std::size_t(tree.size()), 0);
+  DirtyRegion dirty;
+  for (const Cell& c : material_changed) dirty.add(c);
+  {
+    int i = 0, j = 0;
+    while (i < old_tree.size() || j < tree.size()) {
+      const std::uint64_t ci = i < old_tree.size() ? old_tree.leaf(i).morton() : ~0ull;
+      const std::uint64_t cj = j < tree.size() ? tree.leaf(j).morton() : ~0ull;
+      if (ci == cj && old_tree.leaf(i).level == tree.leaf(j).level) {
+        old_to_new[std::size_t(i)] = j;
+        kept[std::size_t(j)] = 1;
+        ++i;
+        ++j;
+      } else if (ci <= cj && i < old_tree.size()) {
+        dirty.add(old_tree.leaf(i++));
+      } else {
+        dirty.add(tree.leaf(j++));
+      }
+    }
+  }
+
+  // Nodes: old nodes outside the dirty region stay; inside it, old nodes and the corners of added leaves are
+  // candidates that remain nodes when some new leaf has them as a corner.
+  std::vector<std::uint64_t> candidates;
+  for (const std::uint64_t key : old.nodes)
+    if (dirty.contains(node_from_key(key))) candidates.push_back(key);
+  for (int j = 0; j < tree.size(); ++j)
+    if (!kept[std::size_t(j)])
+      for (int k = 0; k < 8; ++k) candidates.push_back(node_key(tree.leaf(j).corner(k)));
+  std::sort(candidates.begin(), candidates.end());
+  candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+  std::erase_if(candidates, [&](std::uint64_t key) { return !is_node(tree, node_from_key(key)); });
+
+  // Walk the merged node list in key order: clean nodes copy their DOFs, dirty nodes are split anew.
+  DofMap map;
+  ConnectivityCache connected(tree, root, material);
+  std::vector<SlotBinding> binding(static_cast<std::size_t>(num_slots));
+  std::vector<int> old_dof_to_new(std::size_t(old.num_dofs), -1);
+  std::size_t oi = 0, ci = 0;
+  map.nodes.reserve(old.nodes.size() + candidates.size());
+  while (true) {
+    while (oi < old.nodes.size() && dirty.contains(node_from_key(old.nodes[oi]))) ++oi;
+    const bool have_old = oi < old.nodes.size(), have_new = ci < candidates.size();
+    if (!have_old && !have_new) break;
+    map.node_dof_begin.push_back(map.num_dofs);
+    if (have_old && (!have_new || old.nodes[oi] < candidates[ci])) {
+      const std::uint64_t key = old.nodes[oi];
+      map.nodes.push_back(key);
+      for (int d = old.node_dof_begin[oi]; d < old.node_dof_begin[oi + 1]; ++d) {
+        old_dof_to_new[std::size_t(d)] = map.num_dofs++;
+        map.dof_rest.push_back(old.dof_rest[std::size_t(d)]);
+        map.dof_node.push_back(key);
+        const int s = old.dof_slot[std::size_t(d)];
+        map.dof_slot.push_back(8 * old_to_new[std::size_t(s / 8)] + s % 8);
+      }
+      ++oi;
+    } else {
+      map.nodes.push_back(candidates[ci]);
+      process_node(candidates[ci], tree, root, connected, map, binding);
+      ++ci;
+    }
+  }
+  map.node_dof_begin.push_back(map.num_dofs);
+
+  // Slots of kept leaves at clean nodes keep their binding, renumbered.
+  for (int i = 0; i < old_tree.size(); ++i) {
+    const int j = old_to_new[std::size_t(i)];
+    if (j < 0) continue;
+    for (int k = 0; k < 8; ++k) {
+      const GridPoint n = tree.leaf(j).corner(k);
+      if (dirty.contains(n)) continue;
+      const std::size_t os = std::size_t(8 * i + k), ns = std::size_t(8 * j + k);
+      const int master = old.slot_master[os];
+      binding[ns] = SlotBinding{};
+      if (master < 0) {
+        binding[ns].dof = old_dof_to_new[std::size_t(old.slot_dof[std::size_t(old.slot_begin[os])])];
+      } else {
+        binding[ns].master = old_to_new[std::size_t(master)];
+        binding[ns].weights = corner_weights(tree.leaf(binding[ns].master), n);
+      }
+    }
+  }
+  resolve_rows(binding, map);
   return map;
 }
 

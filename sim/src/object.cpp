@@ -110,7 +110,7 @@ ObjectModel ObjectModel::build(const OctreeSpec& spec, std::shared_ptr<const Mat
   cells.reserve(leaves.size());
   for (const auto& l : leaves) cells.push_back(l.cell);
   m.m_tree = Octree(std::move(cells));
-  m.finish();
+  m.finish(nullptr);
   return m;
 }
 
@@ -136,11 +136,11 @@ ObjectModel ObjectModel::refined(const std::vector<int>& leaves) const {
   ObjectModel m = *this;
   m.m_tree = Octree(std::move(cells));
   m.m_revision = m_revision + 1;
-  m.finish();
+  m.finish(this);
   return m;
 }
 
-void ObjectModel::finish() {
+void ObjectModel::finish(const ObjectModel* previous) {
   const int ne = m_tree.size();
   m_unit_k = unit_hex_stiffness(m_params.poisson_ratio);
 
@@ -153,13 +153,17 @@ void ObjectModel::finish() {
     const Cell& c = m_tree.leaf(e);
     const double h = m_root.cell_edge(c);
     m_edge[std::size_t(e)] = h;
-    m_occupancy[std::size_t(e)] = m_material->occupancy(m_root.cell_box(c));
+    // Leaves kept from the previous revision keep their occupancy (the material is the same).
+    const int kept = previous ? previous->m_tree.find(c) : -1;
+    m_occupancy[std::size_t(e)] = kept >= 0 ? previous->m_occupancy[std::size_t(kept)]
+                                            : m_material->occupancy(m_root.cell_box(c));
     m_k_scale[std::size_t(e)] = m_params.young_modulus * m_occupancy[std::size_t(e)] * h;
     for (int k = 0; k < 8; ++k) m_slot_rest[8 * std::size_t(e) + std::size_t(k)] = m_root.to_world(c.corner(k));
   }
 
   // DOFs by node splitting and hard binding; debug builds check the invariants of SPEC §2.3 on every revision.
-  m_dofs = build_dof_map(m_tree, m_root, *m_material);
+  m_dofs = previous ? update_dof_map(previous->m_dofs, previous->m_tree, m_tree, m_root, *m_material, {})
+                    : build_dof_map(m_tree, m_root, *m_material);
   assert(m_dofs.check_invariants().empty());
 
   // Lumped mass rho phi h^3 / 8 per slot, gathered to DOFs through P^T.

@@ -24,18 +24,24 @@ std::uint64_t morton_encode(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
 }
 
 Octree::Octree(std::vector<Cell> leaves) {
-  // Sort by Morton code of the anchor; non-overlapping cells have distinct anchors.
-  std::vector<std::uint64_t> codes(leaves.size());
-  for (std::size_t i = 0; i < leaves.size(); ++i) codes[i] = leaves[i].morton();
-  std::vector<std::size_t> order(leaves.size());
-  std::iota(order.begin(), order.end(), 0);
-  std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return codes[a] < codes[b]; });
-  m_leaves.reserve(leaves.size());
-  m_codes.reserve(leaves.size());
-  for (std::size_t i : order) {
-    m_leaves.push_back(leaves[i]);
-    m_codes.push_back(codes[i]);
+  m_codes.resize(leaves.size());
+  for (std::size_t i = 0; i < leaves.size(); ++i) m_codes[i] = leaves[i].morton();
+  // Sort by the Morton code of the anchor, unless the cells already come in that order (refinement keeps it).
+  if (std::is_sorted(m_codes.begin(), m_codes.end())) {
+    m_leaves = std::move(leaves);
+  } else {
+    std::vector<std::size_t> order(leaves.size());
+    std::iota(order.begin(), order.end(), 0);
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return m_codes[a] < m_codes[b]; });
+    std::vector<std::uint64_t> codes(leaves.size());
+    m_leaves.reserve(leaves.size());
+    for (std::size_t k = 0; k < order.size(); ++k) {
+      m_leaves.push_back(leaves[order[k]]);
+      codes[k] = m_codes[order[k]];
+    }
+    m_codes = std::move(codes);
   }
+  // Non-overlapping cells have distinct anchors.
   for (std::size_t i = 1; i < m_codes.size(); ++i) {
     if (m_codes[i] == m_codes[i - 1]) throw std::invalid_argument("Octree: two leaves share an anchor");
   }

@@ -14,6 +14,9 @@ struct DofMap {
   std::vector<Vec3> dof_rest;               ///< rest position of each DOF, m (num_dofs)
   std::vector<std::uint64_t> dof_node;      ///< node_key() of each DOF's logical node (num_dofs)
   std::vector<int> dof_slot;                ///< one slot that is this DOF itself, not bound (num_dofs)
+  std::vector<std::uint64_t> nodes;         ///< node_key() of every logical node, sorted (num_nodes)
+  std::vector<int> node_dof_begin;          ///< DOFs of node i are [node_dof_begin[i], node_dof_begin[i+1]) (num_nodes + 1)
+  std::vector<int> slot_master;             ///< leaf a hanging slot is bound to, -1 for DOF slots (num_slots)
   std::vector<int> slot_begin;              ///< CSR row starts of P (8 * num_leaves + 1)
   std::vector<int> slot_dof;                ///< CSR column (DOF) of each entry (nnz(P))
   std::vector<double> slot_weight;          ///< CSR value of each entry, dimensionless (nnz(P))
@@ -34,6 +37,13 @@ struct DofMap {
 /// lie in the same leaf or when they are face-adjacent and their leaves are connected through `material`
 /// (the smaller of the two leaf faces must meet material in positive area).
 DofMap build_dof_map(const Octree& tree, const RootGeometry& root, const MaterialSource& material);
+
+/// The DOF map of `tree` after an edit of `old_tree` whose map is `old`: leaves that were removed or added, and the
+/// cells listed in `material_changed` (every region whose occupancy or face connectivity changed, e.g. by a cut),
+/// are redone; every other node keeps its DOFs. The result is identical to build_dof_map(tree, ...), at a cost
+/// linear in the number of leaves with small constants plus the node splitting of the changed region.
+DofMap update_dof_map(const DofMap& old, const Octree& old_tree, const Octree& tree, const RootGeometry& root,
+                      const MaterialSource& material, const std::vector<Cell>& material_changed);
 
 /// The common face of two face-adjacent cells (the smaller of their two faces) and its normal axis, or nullopt when
 /// the cells are not face neighbours.

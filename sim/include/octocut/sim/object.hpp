@@ -106,7 +106,9 @@ class ObjectModel {
   [[nodiscard]] Vec3 evaluate(const PointEmbedding& e, const std::vector<Vec3>& slots) const;
 
  private:
-  void finish();  // occupancy-dependent data, DOFs, masses, handles
+  // Occupancy-dependent data, DOFs, masses and handles. With the previous revision of the same material, kept
+  // leaves reuse their occupancy and the DOF map is updated locally.
+  void finish(const ObjectModel* previous);
 
   RootGeometry m_root;
   std::shared_ptr<const MaterialSource> m_material;

@@ -34,7 +34,16 @@ double ms_since(Clock::time_point t0) {
 
 }  // namespace
 
+long step_count(const Scene& scene) {
+  const double steps = std::ceil(scene.duration / scene.solver.dt - 1e-9);
+  if (!(steps <= double(kMaxSteps)))
+    throw SceneError(scene.file + ": /duration: duration / dt asks for " + std::to_string(steps) +
+                     " steps; at most " + std::to_string(kMaxSteps) + " are allowed");
+  return std::max(1L, long(steps));
+}
+
 sim::ObjectModel build_object(const Scene& scene) {
+  step_count(scene);
   const ObjectSettings& o = scene.object;
   if (!o.surface_is_box)
     throw SceneError(scene.file + ": /object/surface: mesh surfaces are not supported by this build yet (they land "
@@ -149,13 +158,17 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
       if (std::none_of(m.dof_handle().begin(), m.dof_handle().end(), [&](int d) { return d == int(h); }))
         report.warnings.push_back("/object/handles/" + std::to_string(h) + ": the handle holds no DOF");
     }
+    if (scene.solver.mode == "static" &&
+        std::none_of(m.dof_handle().begin(), m.dof_handle().end(), [](int h) { return h >= 0; }))
+      report.warnings.push_back("/solver/mode: a static solve with no handle holding the object has no unique "
+                                "equilibrium (rigid motions are free)");
     if (scene.output.surface_final || scene.output.surface_every > 0)
       report.warnings.push_back("/output: surface output needs an embedded mesh surface (geometry issue); none written");
     if (scene.output.frames && options.no_render)
       report.warnings.push_back("/output/frames: --no-render given, no frames written");
 
     // Timeline: fixed steps of dt up to the duration.
-    const long steps = std::max(1L, long(std::ceil(scene.duration / scene.solver.dt - 1e-9)));
+    const long steps = step_count(scene);
     const bool tty = options.progress && isatty(STDERR_FILENO);
     auto last_progress = Clock::now();
     for (long i = 0; i < steps; ++i) {

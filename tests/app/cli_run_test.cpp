@@ -153,6 +153,13 @@ TEST_F(CliRunTest, RunawayOctreeLevelIsBadInputNotAHang) {
       << r.output;
 }
 
+TEST_F(CliRunTest, EndlessTimelineIsBadInput) {
+  const fs::path scene = write("endless.json", kCube);
+  const CommandResult r = run_octocut("validate '" + scene.string() + "' --set /duration=1e308 --set /solver/dt=1e-300");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.output.find("endless.json: /duration: duration / dt asks for"), std::string::npos) << r.output;
+}
+
 TEST_F(CliRunTest, UsageErrorsExitTwo) {
   EXPECT_EQ(run_octocut("").exit_code, 2);
   EXPECT_EQ(run_octocut("frobnicate").exit_code, 2);

@@ -9,6 +9,12 @@
 
 namespace octocut::engine {
 
+/// Most steps one run may take (duration / dt); more is bad input, not a run that never ends.
+inline constexpr long kMaxSteps = 1'000'000'000;
+
+/// Number of steps of a scene's timeline, ceil(duration / dt). Throws SceneError past kMaxSteps.
+long step_count(const Scene& scene);
+
 /// Builds the object model of a scene: the octree root (given, or the material's bounding box made cubic and grown
 /// by 5%), base level, refine regions and handles. Throws SceneError for inputs that only fail once built
 /// (for example a probe outside the material).

@@ -71,6 +71,8 @@ int main(int argc, char** argv) {
   bench->add_option("names", names, "Benchmark names or prefixes (default: all)");
   bench->add_option("--json", json_path, "Write the octocut.bench/1 JSON here");
   bench->add_flag("--quiet", quiet, "No table on stdout");
+  bool list = false;
+  bench->add_flag("--list", list, "List the benchmark names and exit");
 
   auto* scene_doc = app.add_subcommand("scene-doc", "Print the scene-format documentation generated from the schema");
 
@@ -84,6 +86,10 @@ int main(int argc, char** argv) {
   try {
     if (*run) return cmd_run(scene_path, sets, out, no_render, quiet);
     if (*validate) return cmd_validate(scene_path, sets);
+    if (*bench && list) {
+      for (const std::string& n : engine::benchmark_names()) std::printf("%s\n", n.c_str());
+      return 0;
+    }
     if (*bench) return cmd_bench(names, json_path, quiet);
     if (*scene_doc) {
       std::cout << engine::scene_format_markdown();

@@ -420,14 +420,4 @@ void DofMap::prolong(const std::vector<Vec3>& dofs, std::vector<Vec3>& slots) co
   }
 }
 
-SpMat DofMap::matrix() const {
-  std::vector<Eigen::Triplet<double>> t;
-  for (int s = 0; s < num_slots(); ++s)
-    for (int i = slot_begin[std::size_t(s)]; i < slot_begin[std::size_t(s) + 1]; ++i)
-      t.emplace_back(s, slot_dof[std::size_t(i)], slot_weight[std::size_t(i)]);
-  SpMat P(num_slots(), num_dofs);
-  P.setFromTriplets(t.begin(), t.end());
-  return P;
-}
-
 }  // namespace octocut::sim

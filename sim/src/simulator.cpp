@@ -553,13 +553,6 @@ double Simulator::elastic_energy() const {
   return m_fem->elastic_energy(m_state.x, frame);
 }
 
-double Simulator::gravity_energy() const {
-  double e = 0.0;
-  for (int d = 0; d < m_model.num_dofs(); ++d)
-    e -= m_model.dof_mass()[std::size_t(d)] * m_options.gravity.dot(m_state.x[std::size_t(d)]);
-  return e;
-}
-
 Vec3 Simulator::position(const PointEmbedding& e) const {
   Vec3 p = Vec3::Zero();
   const DofMap& dm = m_model.dofs();

@@ -28,8 +28,6 @@ struct DofMap {
   [[nodiscard]] std::string check_invariants() const;
   /// Slot positions P x (num_slots), from DOF values (num_dofs).
   void prolong(const std::vector<Vec3>& dofs, std::vector<Vec3>& slots) const;
-  /// P as a sparse matrix (num_slots x num_dofs) for tests.
-  [[nodiscard]] SpMat matrix() const;
 };
 
 

@@ -110,8 +110,6 @@ class Simulator {
   [[nodiscard]] double kinetic_energy() const;
   /// Elastic energy at the current state, J.
   [[nodiscard]] double elastic_energy() const;
-  /// Gravitational potential energy -sum m_i g . x_i, J (relative to the origin).
-  [[nodiscard]] double gravity_energy() const;
   /// Current deformed position of an embedded rest point, m.
   [[nodiscard]] Vec3 position(const PointEmbedding& e) const;
   /// Largest DOF speed in the current state, m/s.

@@ -32,17 +32,6 @@ struct SlotBinding {
   std::array<double, 8> weights{};  // trilinear weights of the master's corners at the slot's node
 };
 
-// Trilinear weights of cell c's corners at grid point p (which lies in the closed cell).
-std::array<double, 8> corner_weights(const Cell& c, const GridPoint& p) {
-  const double s = double(c.size());
-  const double u = double(p.x - c.anchor.x) / s, v = double(p.y - c.anchor.y) / s, w = double(p.z - c.anchor.z) / s;
-  std::array<double, 8> out{};
-  for (int k = 0; k < 8; ++k) {
-    out[std::size_t(k)] = ((k & 1) ? u : 1.0 - u) * ((k & 2) ? v : 1.0 - v) * ((k & 4) ? w : 1.0 - w);
-  }
-  return out;
-}
-
 }  // namespace
 
 std::optional<std::pair<Box3, int>> common_face(const Cell& a, const Cell& b, const RootGeometry& root) {
@@ -164,7 +153,7 @@ void process_node(std::uint64_t key, const Octree& tree, const RootGeometry& roo
         if (map.dof_slot[std::size_t(dof)] < 0) map.dof_slot[std::size_t(dof)] = int(s);
       } else {
         binding[s].master = master;
-        binding[s].weights = corner_weights(tree.leaf(master), n);
+        binding[s].weights = trilinear_weights(tree.leaf(master).local(n));
       }
     }
   }
@@ -369,7 +358,7 @@ DofMap update_dof_map(const DofMap& old, const Octree& old_tree, const Octree& t
         binding[ns].dof = old_dof_to_new[std::size_t(old.slot_dof[std::size_t(old.slot_begin[os])])];
       } else {
         binding[ns].master = old_to_new[std::size_t(master)];
-        binding[ns].weights = corner_weights(tree.leaf(binding[ns].master), n);
+        binding[ns].weights = trilinear_weights(tree.leaf(binding[ns].master).local(n));
       }
     }
   }

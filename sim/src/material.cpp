@@ -5,14 +5,6 @@
 namespace octocut::sim {
 
 namespace {
-// Volume of the intersection of two boxes, m^3.
-double overlap_volume(const Box3& a, const Box3& b) {
-  const Vec3 lo = a.min.cwiseMax(b.min);
-  const Vec3 hi = a.max.cwiseMin(b.max);
-  const Vec3 e = (hi - lo).cwiseMax(0.0);
-  return e.x() * e.y() * e.z();
-}
-
 // True when `box` meets the face rectangle (zero extent along axis) in positive area.
 bool box_meets_face(const Box3& box, const Box3& face, int axis) {
   const double c = face.min[axis];
@@ -27,7 +19,7 @@ bool box_meets_face(const Box3& box, const Box3& face, int axis) {
 
 double BoxMaterial::occupancy(const Box3& box) const {
   const double v = box.volume();
-  return v > 0.0 ? std::clamp(overlap_volume(box, m_box) / v, 0.0, 1.0) : 0.0;
+  return v > 0.0 ? std::clamp(box.overlap_volume(m_box) / v, 0.0, 1.0) : 0.0;
 }
 
 bool BoxMaterial::face_connected(const Box3& face, int axis) const { return box_meets_face(m_box, face, axis); }
@@ -36,7 +28,7 @@ double BoxSetMaterial::occupancy(const Box3& box) const {
   const double v = box.volume();
   if (v <= 0.0) return 0.0;
   double sum = 0.0;
-  for (const Box3& b : m_boxes) sum += overlap_volume(box, b);
+  for (const Box3& b : m_boxes) sum += box.overlap_volume(b);
   return std::clamp(sum / v, 0.0, 1.0);
 }
 

@@ -10,27 +10,12 @@ namespace octocut::sim {
 
 namespace {
 
-// Volume of the intersection of two boxes, m^3.
-double overlap(const Box3& a, const Box3& b) {
-  const Vec3 e = (a.max.cwiseMin(b.max) - a.min.cwiseMax(b.min)).cwiseMax(0.0);
-  return e.x() * e.y() * e.z();
-}
-
 // Rotation for XYZ Euler angles in degrees: first about x, then y, then z (fixed axes).
 Mat3 euler_xyz(const Vec3& deg) {
   const Vec3 r = deg * (std::numbers::pi / 180.0);
   return (Eigen::AngleAxisd(r.z(), Vec3::UnitZ()) * Eigen::AngleAxisd(r.y(), Vec3::UnitY()) *
           Eigen::AngleAxisd(r.x(), Vec3::UnitX()))
       .toRotationMatrix();
-}
-
-// Trilinear weights of a point with local coordinates u in [0,1]^3.
-std::array<double, 8> trilinear(const Vec3& u) {
-  std::array<double, 8> w{};
-  for (int k = 0; k < 8; ++k)
-    w[std::size_t(k)] = ((k & 1) ? u.x() : 1.0 - u.x()) * ((k & 2) ? u.y() : 1.0 - u.y()) *
-                        ((k & 4) ? u.z() : 1.0 - u.z());
-  return w;
 }
 
 // A leaf together with the material fraction it holds.
@@ -81,7 +66,7 @@ ObjectModel ObjectModel::build(const OctreeSpec& spec, std::shared_ptr<const Mat
   auto target = [&](const Box3& box) {
     int level = spec.base_level;
     for (const RefineSpec& r : spec.refine)
-      if (overlap(box, r.box) > 0.0) level = std::max(level, std::min(r.level, spec.max_level));
+      if (box.overlap_volume(r.box) > 0.0) level = std::max(level, std::min(r.level, spec.max_level));
     return level;
   };
 
@@ -189,6 +174,12 @@ void ObjectModel::finish(const ObjectModel* previous) {
   }
 }
 
+Vec3 ObjectModel::handle_position(int dof, double t) const {
+  const int h = m_dof_handle[std::size_t(dof)];
+  const Vec3& X = m_dofs.dof_rest[std::size_t(dof)];
+  return h < 0 ? X : m_handles[std::size_t(h)].position(X, t);
+}
+
 double ObjectModel::volume() const {
   double v = 0.0;
   for (int e = 0; e < num_elements(); ++e) v += m_occupancy[std::size_t(e)] * std::pow(m_edge[std::size_t(e)], 3);
@@ -207,7 +198,7 @@ std::optional<PointEmbedding> ObjectModel::embed(const Vec3& rest) const {
   if (leaf < 0) return std::nullopt;
   const Box3 box = m_root.cell_box(m_tree.leaf(leaf));
   const Vec3 u = ((rest - box.min).array() / (box.max - box.min).array()).matrix().cwiseMax(0.0).cwiseMin(1.0);
-  return PointEmbedding{leaf, trilinear(u)};
+  return PointEmbedding{leaf, trilinear_weights(u)};
 }
 
 Vec3 ObjectModel::evaluate(const PointEmbedding& e, const std::vector<Vec3>& slots) const {
@@ -246,11 +237,8 @@ SimState transfer_state(const ObjectModel& from, const SimState& state, const Ob
       out.v[std::size_t(d)] = Vec3::Zero();
       continue;
     }
-    const Cell& oc = from.tree().leaf(old);
-    const double s = double(oc.size());
-    const Vec3 u((double(n.x) - double(oc.anchor.x)) / s, (double(n.y) - double(oc.anchor.y)) / s,
-                 (double(n.z) - double(oc.anchor.z)) / s);
-    const std::array<double, 8> w = trilinear(u.cwiseMax(0.0).cwiseMin(1.0));
+    const std::array<double, 8> w =
+        trilinear_weights(from.tree().leaf(old).local(n).cwiseMax(0.0).cwiseMin(1.0));
     Vec3 x = Vec3::Zero(), v = Vec3::Zero();
     for (int k = 0; k < 8; ++k) {
       x += w[std::size_t(k)] * xs[8 * std::size_t(old) + std::size_t(k)];

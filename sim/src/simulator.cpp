@@ -345,8 +345,7 @@ bool Simulator::try_dynamic_step(double dt) {
   std::vector<Vec3> target(static_cast<std::size_t>(nd));
   for (int d = 0; d < nd; ++d) {
     if (!m_constrained[std::size_t(d)]) continue;
-    const HandleSpec& h = m.handles()[std::size_t(m.dof_handle()[std::size_t(d)])];
-    target[std::size_t(d)] = h.position(m.dofs().dof_rest[std::size_t(d)], t1);
+    target[std::size_t(d)] = m.handle_position(d, t1);
     const Vec3 vn = (target[std::size_t(d)] - m_state.x[std::size_t(d)]) / dt;
     dv_c.segment<3>(3 * d) = vn - m_state.v[std::size_t(d)];
   }
@@ -456,8 +455,7 @@ void Simulator::step() {
   for (int d = 0; d < m_model.num_dofs(); ++d) {
     m_state.v[std::size_t(d)].setZero();
     if (m_constrained[std::size_t(d)]) {
-      const HandleSpec& h = m_model.handles()[std::size_t(m_model.dof_handle()[std::size_t(d)])];
-      m_state.x[std::size_t(d)] = h.position(m_model.dofs().dof_rest[std::size_t(d)], m_state.t);
+      m_state.x[std::size_t(d)] = m_model.handle_position(d, m_state.t);
     }
   }
 }
@@ -468,8 +466,7 @@ bool Simulator::solve_static(double t) {
   std::vector<Vec3> x = m_state.x;
   for (int d = 0; d < nd; ++d) {
     if (!m_constrained[std::size_t(d)]) continue;
-    const HandleSpec& h = m.handles()[std::size_t(m.dof_handle()[std::size_t(d)])];
-    x[std::size_t(d)] = h.position(m.dofs().dof_rest[std::size_t(d)], t);
+    x[std::size_t(d)] = m.handle_position(d, t);
   }
   VecX f_ext = VecX::Zero(3 * nd);
   for (int d = 0; d < nd; ++d)

@@ -15,6 +15,13 @@ MaterialParams soft() {
   return p;
 }
 
+// The 1 cm soft cube in a root cube of edge `root_size` at `level`, its bottom face clamped.
+ObjectModel clamped_cube(double root_size, int level) {
+  const HandleSpec clamp{{Vec3(-1, -1, -1), Vec3(1, 1, 1e-9)}, {}};
+  return test::box_model({Vec3(0, 0, 0), Vec3(0.01, 0.01, 0.01)}, Vec3(0, 0, 0), root_size, level, {}, {clamp},
+                         soft());
+}
+
 TEST(Dynamics, UnconstrainedBlockFallsAsTheAnalyticFreeFall) {
   const ObjectModel m =
       test::box_model({Vec3(0, 0, 0), Vec3(0.01, 0.01, 0.01)}, Vec3(0, 0, 0), 0.01, 2, {}, {}, soft());
@@ -40,9 +47,7 @@ TEST(Dynamics, UnconstrainedBlockFallsAsTheAnalyticFreeFall) {
 
 TEST(Dynamics, UndampedImplicitEulerNeverIncreasesEnergy) {
   // A cube clamped at the bottom, released from a stretched and sheared state, gravity off.
-  HandleSpec clamp{{Vec3(-1, -1, -1), Vec3(1, 1, 1e-9)}, {}};
-  const ObjectModel m =
-      test::box_model({Vec3(0, 0, 0), Vec3(0.01, 0.01, 0.01)}, Vec3(0, 0, 0), 0.01, 3, {}, {clamp}, soft());
+  const ObjectModel m = clamped_cube(0.01, 3);
   SimulatorOptions o;
   o.dt = 2e-3;
   o.gravity = Vec3::Zero();
@@ -69,9 +74,7 @@ TEST(Dynamics, UndampedImplicitEulerNeverIncreasesEnergy) {
 
 TEST(Dynamics, StepsThatFailAtEveryDtEndInADefinedReset) {
   // A very low speed limit makes every full step fail; halved steps pass. The run never aborts.
-  HandleSpec clamp{{Vec3(-1, -1, -1), Vec3(1, 1, 1e-9)}, {}};
-  const ObjectModel m =
-      test::box_model({Vec3(0, 0, 0), Vec3(0.01, 0.01, 0.01)}, Vec3(0, 0, 0), 0.01, 2, {}, {clamp}, soft());
+  const ObjectModel m = clamped_cube(0.01, 2);
   SimulatorOptions o;
   o.dt = 0.02;
   o.max_speed = 1e-9;
@@ -87,9 +90,7 @@ TEST(Dynamics, StepsThatFailAtEveryDtEndInADefinedReset) {
 TEST(Dynamics, HalvedStepsRecoverWhereTheFullStepFails) {
   // Jacobi-PCG with an iteration cap: the full step's system (M + dt^2 K) is too ill-conditioned to converge in
   // time, the halved steps' systems are not. The step must recover without a reset and still reach t + dt.
-  HandleSpec clamp{{Vec3(-1, -1, -1), Vec3(1, 1, 1e-9)}, {}};
-  const ObjectModel m =
-      test::box_model({Vec3(0, 0, 0), Vec3(0.01, 0.01, 0.01)}, Vec3(0, 0, 0), 0.016, 4, {}, {clamp}, soft());
+  const ObjectModel m = clamped_cube(0.016, 4);
   SimulatorOptions o;
   o.dt = 8e-3;
   o.linear_solver = "pcg";
@@ -108,9 +109,7 @@ TEST(Dynamics, HalvedStepsRecoverWhereTheFullStepFails) {
 
 TEST(Dynamics, StaticNewtonSolveBalancesGravity) {
   // Total vertical reaction of the clamp equals the weight.
-  HandleSpec clamp{{Vec3(-1, -1, -1), Vec3(1, 1, 1e-9)}, {}};
-  const ObjectModel m =
-      test::box_model({Vec3(0, 0, 0), Vec3(0.01, 0.01, 0.01)}, Vec3(0, 0, 0), 0.01, 3, {}, {clamp}, soft());
+  const ObjectModel m = clamped_cube(0.01, 3);
   SimulatorOptions o;
   o.dynamic = false;
   o.tolerance = 1e-10;

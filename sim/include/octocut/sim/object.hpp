@@ -90,6 +90,8 @@ class ObjectModel {
   [[nodiscard]] const std::vector<double>& dof_mass() const { return m_dof_mass; }    ///< lumped, kg (num_dofs)
   /// Handle index that drives each DOF, or -1 for a free DOF (num_dofs).
   [[nodiscard]] const std::vector<int>& dof_handle() const { return m_dof_handle; }
+  /// Where a handle puts DOF `dof` at time t (s); its rest position when no handle drives it, m.
+  [[nodiscard]] Vec3 handle_position(int dof, double t) const;
   /// Rest positions of every slot, m (8 * num_elements).
   [[nodiscard]] const std::vector<Vec3>& slot_rest() const { return m_slot_rest; }
   /// Unit-cube stiffness for this material's Poisson ratio (E = 1, h = 1).

@@ -1,5 +1,6 @@
 #pragma once
 // The linear octree T (SPEC §2.1, paper §4.4): leaves addressed on the finest integer grid, kept in Morton order.
+#include <array>
 #include <optional>
 #include <vector>
 
@@ -63,9 +64,24 @@ struct Cell {
     auto on = [s](std::uint32_t v, std::uint32_t a) { return v == a || v == a + s; };
     return on(p.x, anchor.x) && on(p.y, anchor.y) && on(p.z, anchor.z);
   }
+  /// Local coordinates of grid point p in this cell, [0,1]^3 inside it (outside points give values beyond).
+  [[nodiscard]] Vec3 local(const GridPoint& p) const {
+    const double s = double(size());
+    return {(double(p.x) - double(anchor.x)) / s, (double(p.y) - double(anchor.y)) / s,
+            (double(p.z) - double(anchor.z)) / s};
+  }
   [[nodiscard]] std::uint64_t morton() const { return morton_encode(anchor.x, anchor.y, anchor.z); }
   friend bool operator==(const Cell&, const Cell&) = default;
 };
+
+/// Trilinear weights of the 8 cell corners (corner bits as in Cell::corner) at local coordinates u; they sum to 1.
+inline std::array<double, 8> trilinear_weights(const Vec3& u) {
+  std::array<double, 8> w{};
+  for (int k = 0; k < 8; ++k)
+    w[std::size_t(k)] = ((k & 1) ? u.x() : 1.0 - u.x()) * ((k & 2) ? u.y() : 1.0 - u.y()) *
+                        ((k & 4) ? u.z() : 1.0 - u.z());
+  return w;
+}
 
 /// Geometry of the root cube: maps finest-grid coordinates to metres.
 struct RootGeometry {

@@ -20,6 +20,11 @@ struct Box3 {
     const Vec3 e = (max - min).cwiseMax(0.0);
     return e.x() * e.y() * e.z();
   }
+  /// Volume of the intersection with another box, m^3.
+  [[nodiscard]] double overlap_volume(const Box3& o) const {
+    const Vec3 e = (max.cwiseMin(o.max) - min.cwiseMax(o.min)).cwiseMax(0.0);
+    return e.x() * e.y() * e.z();
+  }
   [[nodiscard]] bool contains(const Vec3& p, double eps = 0.0) const {
     return (p.array() >= min.array() - eps).all() && (p.array() <= max.array() + eps).all();
   }

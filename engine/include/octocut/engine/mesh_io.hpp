@@ -1,0 +1,43 @@
+#pragma once
+// Mesh files (SPEC §2.4): import through assimp with welding and validation, export by file extension.
+// No assimp types appear here.
+#include <filesystem>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "octocut/sim/surface.hpp"
+
+namespace octocut::engine {
+
+/// A mesh file that cannot be read or fails validation. what() names the file and the first offending element.
+class MeshError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// How a mesh file is loaded.
+struct MeshLoadOptions {
+  double scale = 1.0;             ///< multiplies file coordinates to get metres
+  bool validate = true;           ///< run validate_mesh (closed, manifold, oriented, finite, non-degenerate, ...)
+  bool self_intersections = true; ///< also reject self-intersecting meshes (CGAL; costs time on big meshes)
+};
+
+/// A loaded mesh and what the loader had to say about it.
+struct LoadedMesh {
+  sim::TriMesh mesh;                  ///< welded, scaled to metres, outward oriented
+  std::vector<std::string> warnings;  ///< for example "reoriented a consistently inverted mesh"
+};
+
+/// Loads OBJ, PLY (ASCII and binary), STL (ASCII and binary), OFF, glTF and GLB. Throws MeshError.
+LoadedMesh load_mesh(const std::filesystem::path& path, const MeshLoadOptions& options = {});
+
+/// Writes a mesh by extension: .ply (binary little-endian), .obj, .stl (binary), .off, .gltf, .glb. The write is
+/// atomic. Throws MeshError for an unknown extension or a write failure.
+void save_mesh(const std::filesystem::path& path, const sim::TriMesh& mesh);
+
+/// The bytes of a binary little-endian PLY file (float32 x y z, uchar/int32 vertex_indices). Deterministic: the
+/// same mesh always gives the same bytes, with no timestamps or tool versions in the header.
+std::string encode_ply_binary(const sim::TriMesh& mesh);
+
+}  // namespace octocut::engine

@@ -1,0 +1,312 @@
+#include "octocut/sim/material_graph.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace octocut::sim {
+
+namespace {
+
+using Tet = std::array<Vec3, 4>;
+
+double signed_tet_volume(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d) {
+  return (b - a).dot((c - a).cross(d - a)) / 6.0;
+}
+
+double tet_volume(const Tet& t) { return std::abs(signed_tet_volume(t[0], t[1], t[2], t[3])); }
+
+// The point where segment (a, b) crosses the plane x[axis] = c, given the signed distances da <= 0 < db; the
+// coordinate along the axis is set exactly to c so that pieces on either side share their cut face.
+Vec3 crossing(const Vec3& a, const Vec3& b, double da, double db, int axis, double c) {
+  const double t = da / (da - db);
+  Vec3 p = a + t * (b - a);
+  p[axis] = c;
+  return p;
+}
+
+// Keeps the part of each tet on the side sign * (x[axis] − c) <= 0 of the plane. A tet cut by the plane becomes
+// one tet (1 vertex inside) or a prism of 3 tets (2 or 3 vertices inside).
+void clip_tets(const std::vector<Tet>& in, std::vector<Tet>& out, int axis, double c, double sign) {
+  out.clear();
+  for (const Tet& t : in) {
+    std::array<double, 4> d{};
+    std::array<int, 4> inside{}, outside{};
+    int ni = 0, no = 0;
+    for (int k = 0; k < 4; ++k) {
+      d[std::size_t(k)] = sign * (t[std::size_t(k)][axis] - c);
+      if (d[std::size_t(k)] <= 0.0) inside[std::size_t(ni++)] = k;
+      else outside[std::size_t(no++)] = k;
+    }
+    if (ni == 0) continue;
+    if (no == 0) {
+      out.push_back(t);
+      continue;
+    }
+    auto X = [&](int i, int o) {
+      return crossing(t[std::size_t(i)], t[std::size_t(o)], d[std::size_t(i)], d[std::size_t(o)], axis, c);
+    };
+    // A prism with triangles (p0, p1, p2) and (q0, q1, q2), pi joined to qi by planar quads, as three tets.
+    auto prism = [&](const Vec3& p0, const Vec3& p1, const Vec3& p2, const Vec3& q0, const Vec3& q1,
+                     const Vec3& q2) {
+      out.push_back({p0, p1, p2, q0});
+      out.push_back({p1, p2, q0, q1});
+      out.push_back({p2, q0, q1, q2});
+    };
+    if (ni == 1) {
+      const int a = inside[0];
+      out.push_back({t[std::size_t(a)], X(a, outside[0]), X(a, outside[1]), X(a, outside[2])});
+    } else if (ni == 3) {
+      const int o = outside[0];
+      prism(t[std::size_t(inside[0])], t[std::size_t(inside[1])], t[std::size_t(inside[2])], X(inside[0], o),
+            X(inside[1], o), X(inside[2], o));
+    } else {
+      const int a = inside[0], b = inside[1], c0 = outside[0], c1 = outside[1];
+      prism(t[std::size_t(a)], X(a, c0), X(a, c1), t[std::size_t(b)], X(b, c0), X(b, c1));
+    }
+  }
+}
+
+// Area of a convex polygon in 2D by the shoelace formula (any orientation).
+double polygon_area(const std::vector<Eigen::Vector2d>& p) {
+  double s = 0.0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const auto& a = p[i];
+    const auto& b = p[(i + 1) % p.size()];
+    s += a.x() * b.y() - a.y() * b.x();
+  }
+  return 0.5 * std::abs(s);
+}
+
+// Keeps the part of a convex polygon with sign * (p[k] − c) <= 0 (Sutherland–Hodgman against one line).
+std::vector<Eigen::Vector2d> clip_polygon(const std::vector<Eigen::Vector2d>& poly, int k, double c, double sign) {
+  std::vector<Eigen::Vector2d> out;
+  const std::size_t n = poly.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector2d& a = poly[i];
+    const Eigen::Vector2d& b = poly[(i + 1) % n];
+    const double da = sign * (a[k] - c), db = sign * (b[k] - c);
+    if (da <= 0.0) out.push_back(a);
+    if ((da <= 0.0) != (db <= 0.0)) {
+      Eigen::Vector2d p = a + (da / (da - db)) * (b - a);
+      p[k] = c;
+      out.push_back(p);
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+double clip_tet_box_volume(const Tet& tet, const Box3& box) {
+  // Fast paths: the tet's bounding box inside the box, or apart from it.
+  Vec3 lo = tet[0], hi = tet[0];
+  for (int k = 1; k < 4; ++k) {
+    lo = lo.cwiseMin(tet[std::size_t(k)]);
+    hi = hi.cwiseMax(tet[std::size_t(k)]);
+  }
+  if ((lo.array() >= box.min.array()).all() && (hi.array() <= box.max.array()).all()) return tet_volume(tet);
+  if ((hi.array() <= box.min.array()).any() || (lo.array() >= box.max.array()).any()) return 0.0;
+
+  // Clip by each of the six planes that actually cuts the tet.
+  std::vector<Tet> a{tet}, b;
+  b.reserve(16);
+  for (int axis = 0; axis < 3; ++axis) {
+    if (lo[axis] < box.min[axis]) {
+      clip_tets(a, b, axis, box.min[axis], -1.0);
+      a.swap(b);
+    }
+    if (hi[axis] > box.max[axis]) {
+      clip_tets(a, b, axis, box.max[axis], 1.0);
+      a.swap(b);
+    }
+    if (a.empty()) return 0.0;
+  }
+  double v = 0.0;
+  for (const Tet& t : a) v += tet_volume(t);
+  return v;
+}
+
+double tet_face_section_area(const Tet& tet, const Box3& face, int axis) {
+  const double c = face.min[axis];
+  const int u = (axis + 1) % 3, w = (axis + 2) % 3;
+  // Section points: vertices on the plane and crossings of edges with vertices strictly on either side.
+  std::array<double, 4> d{};
+  for (int k = 0; k < 4; ++k) d[std::size_t(k)] = tet[std::size_t(k)][axis] - c;
+  std::vector<Eigen::Vector2d> pts;
+  for (int k = 0; k < 4; ++k)
+    if (d[std::size_t(k)] == 0.0) pts.emplace_back(tet[std::size_t(k)][u], tet[std::size_t(k)][w]);
+  for (int i = 0; i < 4; ++i) {
+    for (int j = i + 1; j < 4; ++j) {
+      const double di = d[std::size_t(i)], dj = d[std::size_t(j)];
+      if ((di < 0.0 && dj > 0.0) || (di > 0.0 && dj < 0.0)) {
+        const Vec3 p = tet[std::size_t(i)] + (di / (di - dj)) * (tet[std::size_t(j)] - tet[std::size_t(i)]);
+        pts.emplace_back(p[u], p[w]);
+      }
+    }
+  }
+  if (pts.size() < 3) return 0.0;
+  // Order the (at most four, convex) section points by angle about their centroid.
+  Eigen::Vector2d m = Eigen::Vector2d::Zero();
+  for (const auto& p : pts) m += p;
+  m /= double(pts.size());
+  std::sort(pts.begin(), pts.end(), [&](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+    return std::atan2(a.y() - m.y(), a.x() - m.x()) < std::atan2(b.y() - m.y(), b.x() - m.x());
+  });
+  // Restrict to the face rectangle.
+  pts = clip_polygon(pts, 0, face.min[u], -1.0);
+  if (pts.size() >= 3) pts = clip_polygon(pts, 0, face.max[u], 1.0);
+  if (pts.size() >= 3) pts = clip_polygon(pts, 1, face.min[w], -1.0);
+  if (pts.size() >= 3) pts = clip_polygon(pts, 1, face.max[w], 1.0);
+  return pts.size() >= 3 ? polygon_area(pts) : 0.0;
+}
+
+MaterialGraph::MaterialGraph(TetMesh mesh) : m_mesh(std::move(mesh)) {
+  const int nv = int(m_mesh.vertices.size());
+  for (std::size_t i = 0; i < m_mesh.vertices.size(); ++i)
+    if (!m_mesh.vertices[i].allFinite())
+      throw std::invalid_argument("material graph: vertex " + std::to_string(i) + " is not finite");
+
+  // Orient every tet positively and drop tets without volume.
+  std::vector<std::array<int32_t, 4>> kept;
+  kept.reserve(m_mesh.tets.size());
+  for (std::size_t t = 0; t < m_mesh.tets.size(); ++t) {
+    auto tet = m_mesh.tets[t];
+    for (int32_t i : tet)
+      if (i < 0 || i >= nv)
+        throw std::invalid_argument("material graph: tet " + std::to_string(t) + " has a vertex index out of range");
+    const double v = signed_tet_volume(m_mesh.vertices[std::size_t(tet[0])], m_mesh.vertices[std::size_t(tet[1])],
+                                       m_mesh.vertices[std::size_t(tet[2])], m_mesh.vertices[std::size_t(tet[3])]);
+    if (v == 0.0) continue;
+    if (v < 0.0) std::swap(tet[2], tet[3]);
+    kept.push_back(tet);
+  }
+  m_mesh.tets = std::move(kept);
+  if (m_mesh.tets.empty()) throw std::invalid_argument("material graph: no tetrahedra with volume");
+
+  // Per-tet bounds and volumes.
+  const std::size_t nt = m_mesh.tets.size();
+  m_tet_box.resize(nt);
+  m_tet_volume.resize(nt);
+  m_bounds.min = Vec3::Constant(std::numeric_limits<double>::infinity());
+  m_bounds.max = -m_bounds.min;
+  for (std::size_t t = 0; t < nt; ++t) {
+    const Tet p = tet(int(t));
+    Box3 b{p[0], p[0]};
+    for (int k = 1; k < 4; ++k) {
+      b.min = b.min.cwiseMin(p[std::size_t(k)]);
+      b.max = b.max.cwiseMax(p[std::size_t(k)]);
+    }
+    m_tet_box[t] = b;
+    m_tet_volume[t] = tet_volume(p);
+    m_volume += m_tet_volume[t];
+    m_bounds.min = m_bounds.min.cwiseMin(b.min);
+    m_bounds.max = m_bounds.max.cwiseMax(b.max);
+  }
+
+  // Uniform grid with about one tet per cell: cell edge ~ cube root of the bounding volume per tet.
+  const Vec3 ext = (m_bounds.max - m_bounds.min).cwiseMax(1e-12);
+  const double h = std::cbrt(ext.prod() / double(nt));
+  for (int a = 0; a < 3; ++a) {
+    m_dims[std::size_t(a)] = std::clamp(int(std::ceil(ext[a] / h)), 1, 256);
+    m_cell[a] = ext[a] / m_dims[std::size_t(a)];
+  }
+  const std::size_t ncells = std::size_t(m_dims[0]) * std::size_t(m_dims[1]) * std::size_t(m_dims[2]);
+  auto cell_index = [&](int i, int j, int k) {
+    return (std::size_t(k) * std::size_t(m_dims[1]) + std::size_t(j)) * std::size_t(m_dims[0]) + std::size_t(i);
+  };
+  // Two passes (count, fill) build the CSR lists; tets appear in ascending order in every cell.
+  m_cell_begin.assign(ncells + 1, 0);
+  for (int pass = 0; pass < 2; ++pass) {
+    std::vector<int> fill;
+    if (pass == 1) {
+      for (std::size_t c = 0; c < ncells; ++c) m_cell_begin[c + 1] += m_cell_begin[c];
+      m_cell_tets.resize(std::size_t(m_cell_begin[ncells]));
+      fill.assign(m_cell_begin.begin(), m_cell_begin.end() - 1);
+    }
+    for (std::size_t t = 0; t < nt; ++t) {
+      std::array<int, 3> lo{}, hi{};
+      cell_range(m_tet_box[t], lo, hi);
+      for (int k = lo[2]; k <= hi[2]; ++k)
+        for (int j = lo[1]; j <= hi[1]; ++j)
+          for (int i = lo[0]; i <= hi[0]; ++i) {
+            const std::size_t c = cell_index(i, j, k);
+            if (pass == 0) ++m_cell_begin[c + 1];
+            else m_cell_tets[std::size_t(fill[c]++)] = int(t);
+          }
+    }
+  }
+}
+
+std::array<Vec3, 4> MaterialGraph::tet(int t) const {
+  const auto& q = m_mesh.tets[std::size_t(t)];
+  return {m_mesh.vertices[std::size_t(q[0])], m_mesh.vertices[std::size_t(q[1])],
+          m_mesh.vertices[std::size_t(q[2])], m_mesh.vertices[std::size_t(q[3])]};
+}
+
+void MaterialGraph::cell_range(const Box3& box, std::array<int, 3>& lo, std::array<int, 3>& hi) const {
+  for (int a = 0; a < 3; ++a) {
+    const double l = std::floor((box.min[a] - m_bounds.min[a]) / m_cell[a]);
+    const double u = std::floor((box.max[a] - m_bounds.min[a]) / m_cell[a]);
+    lo[std::size_t(a)] = int(std::clamp(l, 0.0, double(m_dims[std::size_t(a)] - 1)));
+    hi[std::size_t(a)] = int(std::clamp(u, 0.0, double(m_dims[std::size_t(a)] - 1)));
+  }
+}
+
+std::vector<int> MaterialGraph::tets_near(const Box3& box) const {
+  std::vector<int> out;
+  if ((box.max.array() < m_bounds.min.array()).any() || (box.min.array() > m_bounds.max.array()).any()) return out;
+  std::array<int, 3> lo{}, hi{};
+  cell_range(box, lo, hi);
+  const std::size_t cells = std::size_t(hi[0] - lo[0] + 1) * std::size_t(hi[1] - lo[1] + 1) *
+                            std::size_t(hi[2] - lo[2] + 1);
+  // A box covering most of the grid: test every tet directly instead of gathering duplicates.
+  auto overlaps = [&](int t) {
+    const Box3& b = m_tet_box[std::size_t(t)];
+    return (b.max.array() >= box.min.array()).all() && (b.min.array() <= box.max.array()).all();
+  };
+  if (cells * 4 > m_cell_begin.size()) {
+    for (int t = 0; t < num_tets(); ++t)
+      if (overlaps(t)) out.push_back(t);
+    return out;
+  }
+  for (int k = lo[2]; k <= hi[2]; ++k)
+    for (int j = lo[1]; j <= hi[1]; ++j)
+      for (int i = lo[0]; i <= hi[0]; ++i) {
+        const std::size_t c =
+            (std::size_t(k) * std::size_t(m_dims[1]) + std::size_t(j)) * std::size_t(m_dims[0]) + std::size_t(i);
+        for (int n = m_cell_begin[c]; n < m_cell_begin[c + 1]; ++n)
+          if (overlaps(m_cell_tets[std::size_t(n)])) out.push_back(m_cell_tets[std::size_t(n)]);
+      }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+double MaterialGraph::occupancy(const Box3& box) const {
+  const double bv = box.volume();
+  if (!(bv > 0.0)) return 0.0;
+  double v = 0.0;
+  // Tets in ascending order: the sum is deterministic.
+  for (int t : tets_near(box)) {
+    const Box3& b = m_tet_box[std::size_t(t)];
+    if ((b.min.array() >= box.min.array()).all() && (b.max.array() <= box.max.array()).all())
+      v += m_tet_volume[std::size_t(t)];
+    else
+      v += clip_tet_box_volume(tet(t), box);
+  }
+  return std::clamp(v / bv, 0.0, 1.0);
+}
+
+bool MaterialGraph::face_connected(const Box3& face, int axis) const {
+  // Positive area relative to the face, so that rounding in a crossing point cannot connect a mere edge contact.
+  const int u = (axis + 1) % 3, w = (axis + 2) % 3;
+  const double threshold = 1e-12 * (face.max[u] - face.min[u]) * (face.max[w] - face.min[w]);
+  for (int t : tets_near(face))
+    if (tet_face_section_area(tet(t), face, axis) > threshold) return true;
+  return false;
+}
+
+}  // namespace octocut::sim

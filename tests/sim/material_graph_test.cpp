@@ -1,0 +1,186 @@
+// Material graph M: exact tet–box clipping against analytic volumes and conservation, connectivity on hand-built
+// tet configurations, and the octree built from M against the exact box material.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "octocut/sim/material_graph.hpp"
+#include "test_util.hpp"
+
+namespace octocut::sim {
+namespace {
+
+// The corner tet {x, y, z >= 0, x + y + z <= 1}.
+const std::array<Vec3, 4> kCorner{Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0, 0, 1)};
+
+double cube3(double v) { return v > 0.0 ? v * v * v : 0.0; }
+
+// A box [lo, hi] split into 6 Kuhn tets per cell on an n×n×n grid whose interior vertices are jittered by up to
+// `jitter` of a cell (the boundary stays on the box, so the tets tile the box exactly).
+TetMesh kuhn_box(const Box3& box, int n, double jitter, unsigned seed) {
+  TetMesh m;
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-jitter, jitter);
+  const Vec3 h = (box.max - box.min) / n;
+  auto id = [&](int i, int j, int k) { return int32_t((k * (n + 1) + j) * (n + 1) + i); };
+  for (int k = 0; k <= n; ++k)
+    for (int j = 0; j <= n; ++j)
+      for (int i = 0; i <= n; ++i) {
+        Vec3 p = box.min + Vec3(i * h.x(), j * h.y(), k * h.z());
+        const std::array<int, 3> g{i, j, k};
+        for (int a = 0; a < 3; ++a)
+          if (g[std::size_t(a)] > 0 && g[std::size_t(a)] < n) p[a] += u(rng) * h[a];
+        m.vertices.push_back(p);
+      }
+  // The six tets of a cube along the main diagonal (0 → 7), one per axis permutation.
+  const int perms[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i)
+        for (const auto& p : perms) {
+          std::array<int, 3> c{i, j, k};
+          std::array<int32_t, 4> t{};
+          t[0] = id(c[0], c[1], c[2]);
+          for (int s = 0; s < 3; ++s) {
+            ++c[std::size_t(p[s])];
+            t[std::size_t(s) + 1] = id(c[0], c[1], c[2]);
+          }
+          m.tets.push_back(t);
+        }
+  return m;
+}
+
+TEST(TetClip, CornerTetInCubeMatchesInclusionExclusion) {
+  // Volume of {x + y + z <= 1} within [0, a]^3 by inclusion–exclusion over the faces x = a, y = a, z = a.
+  for (double a : {0.1, 0.3, 0.5, 0.7, 0.999, 1.0, 1.5}) {
+    const double expected = (1.0 - 3 * cube3(1 - a) + 3 * cube3(1 - 2 * a) - cube3(1 - 3 * a)) / 6.0;
+    const double got = clip_tet_box_volume(kCorner, Box3{Vec3::Zero(), Vec3::Constant(a)});
+    EXPECT_NEAR(got, expected, 1e-15) << "a = " << a;
+  }
+}
+
+TEST(TetClip, RandomTetsArePartitionedByAGridOfBoxes) {
+  // Clipped volumes over a grid of boxes that tiles space around the tet sum to the tet's volume.
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int trial = 0; trial < 50; ++trial) {
+    std::array<Vec3, 4> t{};
+    for (auto& p : t) p = Vec3(u(rng), u(rng), u(rng));
+    const double volume = std::abs((t[1] - t[0]).dot((t[2] - t[0]).cross(t[3] - t[0]))) / 6.0;
+    double sum = 0.0;
+    const int n = 7;
+    const double h = 2.0 / n;
+    for (int k = 0; k < n; ++k)
+      for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+          const Vec3 lo(-1 + i * h, -1 + j * h, -1 + k * h);
+          sum += clip_tet_box_volume(t, Box3{lo, lo + Vec3::Constant(h)});
+        }
+    EXPECT_NEAR(sum, volume, 1e-14 * std::max(1.0, volume)) << "trial " << trial;
+  }
+}
+
+TEST(TetClip, BoxApartOrAroundGivesZeroOrAll) {
+  EXPECT_EQ(clip_tet_box_volume(kCorner, Box3{Vec3(2, 2, 2), Vec3(3, 3, 3)}), 0.0);
+  EXPECT_NEAR(clip_tet_box_volume(kCorner, Box3{Vec3::Constant(-1), Vec3::Constant(2)}), 1.0 / 6.0, 1e-16);
+}
+
+TEST(TetSection, AreaOfAxisSectionIsAnalytic) {
+  // The corner tet cut by z = c is the right triangle with legs 1 − c; a face rectangle [0, s]^2 keeps
+  // the part with x + y <= 1 − c.
+  const double c = 0.25, legs = 0.75;
+  Box3 face{Vec3(-1, -1, c), Vec3(2, 2, c)};
+  EXPECT_NEAR(tet_face_section_area(kCorner, face, 2), 0.5 * legs * legs, 1e-15);
+  const double s = 0.5;  // square [0, 0.5]^2 cut by x + y <= 0.75: loses a corner triangle of legs 0.25
+  face = Box3{Vec3(0, 0, c), Vec3(s, s, c)};
+  EXPECT_NEAR(tet_face_section_area(kCorner, face, 2), s * s - 0.5 * 0.25 * 0.25, 1e-15);
+}
+
+TEST(MaterialGraphConnectivity, EdgeContactIsNotConnectedFaceAreaIs) {
+  // Two tets on either side of the plane x = 0 that share only the edge (0,0,0)–(0,1,0) lying in the plane.
+  TetMesh edge_only;
+  edge_only.vertices = {Vec3(0, 0, 0), Vec3(0, 1, 0), Vec3(-1, 0, 0.5), Vec3(-1, 0, -0.5), Vec3(1, 0, 0.5),
+                        Vec3(1, 0, -0.5)};
+  edge_only.tets = {{0, 1, 2, 3}, {0, 1, 4, 5}};
+  const MaterialGraph g(edge_only);
+  const Box3 face{Vec3(0, -1, -1), Vec3(0, 2, 2)};
+  EXPECT_FALSE(g.face_connected(face, 0));
+  // The leaves on either side both hold material nonetheless.
+  EXPECT_GT(g.occupancy(Box3{Vec3(-1, -1, -1), Vec3(0, 2, 2)}), 0.0);
+  EXPECT_GT(g.occupancy(Box3{Vec3(0, -1, -1), Vec3(1, 2, 2)}), 0.0);
+
+  // Two tets sharing the triangle (0,0,0), (0,1,0), (0,0,1) in the plane x = 0: connected.
+  TetMesh shared_face;
+  shared_face.vertices = {Vec3(0, 0, 0), Vec3(0, 1, 0), Vec3(0, 0, 1), Vec3(-1, 0, 0), Vec3(1, 0, 0)};
+  shared_face.tets = {{0, 1, 2, 3}, {0, 1, 2, 4}};
+  EXPECT_TRUE(MaterialGraph(shared_face).face_connected(face, 0));
+  // A face rectangle that only touches the shared triangle at its corner vertex: not connected.
+  EXPECT_FALSE(MaterialGraph(shared_face).face_connected(Box3{Vec3(0, -1, -1), Vec3(0, 0, 0)}, 0));
+
+  // One tet crossing the plane: its section has positive area, so the faces it crosses are connected.
+  TetMesh crossing;
+  crossing.vertices = {Vec3(-1, 0, 0), Vec3(1, 0.1, 0), Vec3(0, 1, 0.1), Vec3(0.1, 0.1, 1)};
+  crossing.tets = {{0, 1, 2, 3}};
+  EXPECT_TRUE(MaterialGraph(crossing).face_connected(face, 0));
+  // ... but not a face rectangle beside the section.
+  EXPECT_FALSE(MaterialGraph(crossing).face_connected(Box3{Vec3(0, 1.5, 1.5), Vec3(0, 2, 2)}, 0));
+}
+
+TEST(MaterialGraphOccupancy, SumOverAllLeavesEqualsTetVolume) {
+  // A jittered tet mesh of a box, not aligned with the octree; sum occupancy × cell volume over every cell of a
+  // uniform level (empty ones included).
+  const Box3 box{Vec3(0.013, 0.021, 0.007), Vec3(0.071, 0.052, 0.043)};
+  const MaterialGraph g(kuhn_box(box, 6, 0.3, 3));
+  const RootGeometry root{Vec3::Zero(), 0.08};
+  const int level = 4, n = 1 << level;
+  double sum = 0.0;
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) {
+        const double h = root.size / n;
+        const Vec3 lo = root.min + h * Vec3(i, j, k);
+        const Box3 cell{lo, lo + Vec3::Constant(h)};
+        sum += g.occupancy(cell) * cell.volume();
+      }
+  EXPECT_NEAR(sum, g.volume(), 1e-12 * g.volume());
+  // The tets tile the box exactly, so their volume is the box's.
+  EXPECT_NEAR(g.volume(), box.volume(), 1e-12 * box.volume());
+}
+
+TEST(MaterialGraphOccupancy, OctreeFromTetsOfABoxMatchesTheExactBoxMaterial) {
+  // A tet mesh that tiles a box describes the same material as the box itself: same leaves, occupancies and DOFs.
+  const Box3 box{Vec3(0.0, 0.0, 0.0), Vec3(0.05, 0.02, 0.03)};
+  OctreeSpec spec;
+  spec.root = {Vec3(-0.004, -0.003, -0.002), 0.06};
+  spec.base_level = 4;
+  spec.max_level = 6;
+  spec.refine = {{Box3{Vec3(0.0, 0.0, 0.0), Vec3(0.01, 0.02, 0.03)}, 6}};
+  const auto tets = std::make_shared<MaterialGraph>(kuhn_box(box, 5, 0.25, 11));
+  const ObjectModel a = ObjectModel::build(spec, tets, {}, {});
+  const ObjectModel b = ObjectModel::build(spec, std::make_shared<BoxMaterial>(box), {}, {});
+  ASSERT_EQ(a.num_elements(), b.num_elements());
+  for (int e = 0; e < a.num_elements(); ++e) {
+    ASSERT_EQ(a.tree().leaf(e).morton(), b.tree().leaf(e).morton());
+    EXPECT_NEAR(a.occupancy()[std::size_t(e)], b.occupancy()[std::size_t(e)], 1e-12) << "leaf " << e;
+  }
+  EXPECT_EQ(a.num_dofs(), b.num_dofs());
+  EXPECT_EQ(a.dofs().hanging_slots, b.dofs().hanging_slots);
+  EXPECT_NEAR(a.volume(), box.volume(), 1e-12 * box.volume());
+}
+
+TEST(MaterialGraph, RejectsBadInput) {
+  TetMesh m;
+  EXPECT_THROW(MaterialGraph{m}, std::invalid_argument);
+  m.vertices = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0, 0, std::nan(""))};
+  m.tets = {{0, 1, 2, 3}};
+  EXPECT_THROW(MaterialGraph{m}, std::invalid_argument);
+  m.vertices[3] = Vec3(0, 0, 1);
+  m.tets = {{0, 1, 2, 4}};
+  EXPECT_THROW(MaterialGraph{m}, std::invalid_argument);
+  // A negatively oriented tet is reoriented, not rejected.
+  m.tets = {{0, 2, 1, 3}};
+  EXPECT_NEAR(MaterialGraph(m).volume(), 1.0 / 6.0, 1e-16);
+}
+
+}  // namespace
+}  // namespace octocut::sim

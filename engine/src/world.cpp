@@ -11,8 +11,12 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "octocut/cutting/material_mesher.hpp"
 #include "octocut/engine/io.hpp"
+#include "octocut/engine/material_graph_cache.hpp"
+#include "octocut/engine/mesh_io.hpp"
 #include "octocut/engine/scene_loader.hpp"
+#include "octocut/sim/surface_check.hpp"
 #include "report.hpp"
 
 namespace octocut::engine {
@@ -42,14 +46,64 @@ long step_count(const Scene& scene) {
   return std::max(1L, long(steps));
 }
 
-sim::ObjectModel build_object(const Scene& scene) {
+namespace {
+
+// The closed surface of a box: 8 vertices, 12 outward-oriented triangles.
+sim::TriMesh box_surface(const sim::Box3& b) {
+  sim::TriMesh m;
+  for (int k = 0; k < 8; ++k)
+    m.vertices.emplace_back(k & 1 ? b.max.x() : b.min.x(), k & 2 ? b.max.y() : b.min.y(),
+                            k & 4 ? b.max.z() : b.min.z());
+  m.triangles = {{0, 2, 3}, {0, 3, 1}, {4, 5, 7}, {4, 7, 6}, {0, 1, 5}, {0, 5, 4},
+                 {2, 6, 7}, {2, 7, 3}, {0, 4, 6}, {0, 6, 2}, {1, 3, 7}, {1, 7, 5}};
+  return m;
+}
+
+// Most tets a material graph may be asked for (volume / cell_size^3 is about a fifth of the tet count).
+constexpr double kMaxMaterialCells = 1e6;
+
+}  // namespace
+
+sim::ObjectModel build_object(const Scene& scene) { return build_scene_object(scene).model; }
+
+SceneObject build_scene_object(const Scene& scene) {
   step_count(scene);
   const ObjectSettings& o = scene.object;
-  if (!o.surface_is_box)
-    throw SceneError(scene.file + ": /object/surface: mesh surfaces are not supported by this build yet (they land "
-                                  "with the geometry issue); use {\"box\": {\"min\": [...], \"max\": [...]}}");
-  auto material = std::make_shared<sim::BoxMaterial>(box3(o.surface_box));
-  const sim::Box3 bounds = material->bounds();
+  SceneObject out;
+  std::shared_ptr<const sim::MaterialSource> material;
+  if (o.surface_is_box) {
+    material = std::make_shared<sim::BoxMaterial>(box3(o.surface_box));
+    out.surface = box_surface(box3(o.surface_box));
+  } else {
+    // The mesh: loaded, welded, validated and scaled to metres.
+    try {
+      LoadedMesh loaded = load_mesh(o.surface_path, MeshLoadOptions{o.scale, true, true});
+      out.surface = std::move(loaded.mesh);
+      for (std::string& w : loaded.warnings) out.warnings.push_back("/object/surface: " + o.surface_path + ": " + w);
+    } catch (const MeshError& e) {
+      throw SceneError(scene.file + ": /object/surface: " + e.what());
+    }
+    // M at the requested cell size, from the cache when possible.
+    const double h = o.material_graph_cell_size;
+    const double cells = sim::signed_volume(out.surface) / (h * h * h);
+    if (!(cells <= kMaxMaterialCells))
+      throw SceneError(scene.file + ": /object/material_graph/cell_size: " + std::to_string(h) +
+                       " m is too small for this object (volume / cell_size^3 = " + std::to_string(cells) +
+                       ", at most 1e6); check also /object/scale");
+    try {
+      MaterialGraphResult g = material_graph_for(out.surface, h);
+      if (!g.warning.empty()) out.warnings.push_back("/object/material_graph: " + g.warning);
+      out.graph_from_cache = g.from_cache;
+      out.graph_ms = g.ms;
+      out.graph = std::make_shared<sim::MaterialGraph>(std::move(g.mesh));
+    } catch (const cutting::MeshingError& e) {
+      throw SceneError(scene.file + ": /object/material_graph: " + e.what());
+    } catch (const std::invalid_argument& e) {
+      throw SceneError(scene.file + ": /object/material_graph: " + e.what());
+    }
+    material = out.graph;
+  }
+  const sim::Box3 bounds = sim::bounds(out.surface);
 
   // Root cube: given, or the material's bounding box made cubic and grown by 5%.
   sim::OctreeSpec spec;
@@ -88,7 +142,8 @@ sim::ObjectModel build_object(const Scene& scene) {
     if (!model.embed(v3(scene.probes[i].point)))
       throw SceneError(scene.file + ": /probes/" + std::to_string(i) + "/point: outside the object's material");
   }
-  return model;
+  out.model = std::move(model);
+  return out;
 }
 
 sim::SimulatorOptions simulator_options(const Scene& scene) {
@@ -118,9 +173,9 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
                                 "(EGL rendering lands with the rendering issue); run with --no-render";
     return result;
   }
-  std::optional<sim::ObjectModel> model;
+  std::optional<SceneObject> object;
   try {
-    model = build_object(scene);
+    object = build_scene_object(scene);
   } catch (const SceneError& e) {
     result.exit_code = 2;
     result.error = e.what();
@@ -144,16 +199,20 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
   auto old_term = std::signal(SIGTERM, on_signal);
 
   try {
-    sim::Simulator sim(std::move(*model), simulator_options(scene));
+    report.warnings = object->warnings;
+    const sim::TriMesh& surface = object->surface;
+    sim::Simulator sim(std::move(object->model), simulator_options(scene));
     const sim::ObjectModel& m = sim.model();
     report.elements = m.num_elements();
     report.dofs = m.num_dofs();
     report.hanging_slots = m.dofs().hanging_slots;
-    // A box primitive's surface: 8 vertices, 12 triangles, one closed component.
-    report.surface_vertices = 8;
-    report.surface_triangles = 12;
-    report.surface_components = 1;
-    report.rest_volume_m3 = m.material().bounds().volume();
+    report.tets = object->graph ? object->graph->num_tets() : 0;
+    report.surface_vertices = long(surface.num_vertices());
+    report.surface_triangles = long(surface.num_triangles());
+    const sim::SurfaceCheck check = sim::check_surface(surface);
+    report.surface_closed = check.closed && check.edge_manifold && check.oriented;
+    report.surface_components = check.components;
+    report.rest_volume_m3 = sim::signed_volume(surface);
     for (std::size_t h = 0; h < m.handles().size(); ++h) {
       if (std::none_of(m.dof_handle().begin(), m.dof_handle().end(), [&](int d) { return d == int(h); }))
         report.warnings.push_back("/object/handles/" + std::to_string(h) + ": the handle holds no DOF");

@@ -5,7 +5,9 @@
 #include <vector>
 
 #include "octocut/engine/scene.hpp"
+#include "octocut/sim/material_graph.hpp"
 #include "octocut/sim/simulator.hpp"
+#include "octocut/sim/surface.hpp"
 
 namespace octocut::engine {
 
@@ -15,9 +17,23 @@ inline constexpr long kMaxSteps = 1'000'000'000;
 /// Number of steps of a scene's timeline, ceil(duration / dt). Throws SceneError past kMaxSteps.
 long step_count(const Scene& scene);
 
-/// Builds the object model of a scene: the octree root (given, or the material's bounding box made cubic and grown
-/// by 5%), base level, refine regions and handles. Throws SceneError for inputs that only fail once built
-/// (for example a probe outside the material).
+/// A scene's deformable object: its model, its rest surface S and, for mesh surfaces, its material graph M.
+struct SceneObject {
+  sim::ObjectModel model;
+  sim::TriMesh surface;                                ///< rest surface S, m; a box primitive's is its 12 triangles
+  std::shared_ptr<const sim::MaterialGraph> graph;     ///< M; null for a box primitive (exact box material)
+  bool graph_from_cache = false;                       ///< M was read from the disk cache
+  double graph_ms = 0.0;                               ///< time to obtain M, ms
+  std::vector<std::string> warnings;                   ///< from loading the mesh and the cache
+};
+
+/// Builds the object of a scene. A mesh surface is loaded (assimp), validated, scaled to metres, and meshed into M
+/// (CGAL Mesh_3, cached on disk); a box surface is an exact box material. Then the octree: root given, or the
+/// bounding box of S made cubic and grown by 5%; base level, refine regions, handles. Throws SceneError naming the
+/// file and JSON pointer for inputs that only fail once built (a bad mesh file, a probe outside the material).
+SceneObject build_scene_object(const Scene& scene);
+
+/// The model of build_scene_object, for callers that need no surface.
 sim::ObjectModel build_object(const Scene& scene);
 
 /// The simulator options a scene asks for.

@@ -36,6 +36,17 @@ LoadedMesh load_mesh(const std::filesystem::path& path, const MeshLoadOptions& o
 /// atomic. Throws MeshError for an unknown extension or a write failure.
 void save_mesh(const std::filesystem::path& path, const sim::TriMesh& mesh);
 
+/// Validates `mesh` as a solid's surface (SPEC §2.4) and returns its warnings. Checks, in this order: vertex indices in
+/// range, finite coordinates, no degenerate triangle (a repeated vertex index, or twice the area at most 1e-12 times
+/// the squared bounding-box diagonal), closed (no edge used by one triangle only), edge-manifold (no edge used by more
+/// than two), vertex-manifold (the triangles around each vertex form one fan), consistent orientation (each edge used
+/// once in each direction), non-zero volume (|V| above 1e-12 times the cubed diagonal), and, when
+/// `self_intersections`, no two triangles intersecting other than through shared vertices or edges. A mesh with
+/// negative signed volume is turned inside out in place (every triangle flipped) with the warning
+/// "<file>: reoriented a consistently inverted mesh ...". Throws MeshError, whose message starts with `file` and names
+/// the first offending vertex, triangle or edge.
+std::vector<std::string> validate_mesh(sim::TriMesh& mesh, const std::string& file, bool self_intersections);
+
 /// The bytes of a binary little-endian PLY file (float32 x y z, uchar/int32 vertex_indices). Deterministic: the
 /// same mesh always gives the same bytes, with no timestamps or tool versions in the header.
 std::string encode_ply_binary(const sim::TriMesh& mesh);

@@ -12,6 +12,7 @@
 #include <filesystem>
 
 #include "octocut/cutting/material_mesher.hpp"
+#include "octocut/cutting/mesh_check.hpp"
 #include "octocut/engine/io.hpp"
 #include "octocut/engine/material_graph_cache.hpp"
 #include "octocut/engine/mesh_io.hpp"
@@ -212,6 +213,9 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
     const sim::SurfaceCheck check = sim::check_surface(surface);
     report.surface_closed = check.closed && check.edge_manifold && check.oriented;
     report.surface_components = check.components;
+    // Exact self-intersection test; it needs a manifold mesh, which a validated or box surface is.
+    if (check.edge_manifold && check.vertex_manifold)
+      report.surface_self_intersecting = cutting::find_self_intersection(surface).has_value();
     report.rest_volume_m3 = sim::signed_volume(surface);
     for (std::size_t h = 0; h < m.handles().size(); ++h) {
       if (std::none_of(m.dof_handle().begin(), m.dof_handle().end(), [&](int d) { return d == int(h); }))

@@ -1,0 +1,141 @@
+// `octocut run` with a mesh surface end to end: the mesh is loaded, validated and scaled, M is generated and cached,
+// the octree is built on M, and the report states the surface. Bad meshes and parameters exit 2 naming the file and
+// the JSON pointer.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "cli_util.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+using octocut::test::CommandResult;
+using octocut::test::run_octocut;
+
+// A closed cube of edge 10 mm as OBJ (1-based indices), outward oriented; `flip` reverses every triangle.
+std::string cube_obj(bool flip) {
+  std::string s;
+  for (int k = 0; k < 8; ++k)
+    s += "v " + std::to_string(k & 1 ? 10 : 0) + " " + std::to_string(k & 2 ? 10 : 0) + " " +
+         std::to_string(k & 4 ? 10 : 0) + "\n";
+  const int tris[12][3] = {{0, 2, 3}, {0, 3, 1}, {4, 5, 7}, {4, 7, 6}, {0, 1, 5}, {0, 5, 4},
+                           {2, 6, 7}, {2, 7, 3}, {0, 4, 6}, {0, 6, 2}, {1, 3, 7}, {1, 7, 5}};
+  for (const auto& t : tris) {
+    const int a = t[0] + 1, b = flip ? t[2] + 1 : t[1] + 1, c = flip ? t[1] + 1 : t[2] + 1;
+    s += "f " + std::to_string(a) + " " + std::to_string(b) + " " + std::to_string(c) + "\n";
+  }
+  return s;
+}
+
+class CliMeshTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const std::string test = ::testing::UnitTest::GetInstance()->current_test_info()->name();
+    m_dir = fs::temp_directory_path() / ("octocut_mesh_test_" + std::to_string(::getpid()) + "_" + test);
+    fs::remove_all(m_dir);
+    fs::create_directories(m_dir);
+    ::setenv("OCTOCUT_CACHE_DIR", (m_dir / "cache").c_str(), 1);
+  }
+  void TearDown() override {
+    ::unsetenv("OCTOCUT_CACHE_DIR");
+    fs::remove_all(m_dir);
+  }
+  fs::path write(const std::string& name, const std::string& text) {
+    const fs::path p = m_dir / name;
+    std::ofstream(p) << text;
+    return p;
+  }
+  // A scene on surface file `mesh` (mm), clamped at z < 1 mm, with the given extra object keys.
+  fs::path scene(const std::string& mesh, const std::string& cell_size = "0.002") {
+    return write("scene.json", R"({
+      "name": "mesh cube", "duration": 0.02,
+      "solver": {"dt": 0.001, "threads": 2},
+      "object": {"surface": ")" + mesh + R"(", "scale": 0.001,
+                 "material": {"young_modulus": 5e4, "poisson_ratio": 0.45},
+                 "material_graph": {"cell_size": )" + cell_size + R"(},
+                 "octree": {"base_level": 3},
+                 "handles": [{"box": {"min": [-1, -1, -1], "max": [1, 1, 0.001]}}]},
+      "probes": [{"name": "top", "point": [0.005, 0.005, 0.0099]}]
+    })");
+  }
+  json report() {
+    std::ifstream in(m_dir / "out" / "report.json");
+    return json::parse(in);
+  }
+  CommandResult run(const fs::path& scene_file) {
+    return run_octocut("run '" + scene_file.string() + "' --out '" + (m_dir / "out").string() + "' --quiet");
+  }
+  fs::path m_dir;
+};
+
+TEST_F(CliMeshTest, MeshSurfaceRunsEndToEndAndTheCacheIsUsed) {
+  write("cube.obj", cube_obj(false));
+  const CommandResult r = run(scene("cube.obj"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json j = report();
+  EXPECT_EQ(j["status"], "ok");
+  EXPECT_EQ(j["counts"]["surface_vertices"], 8);
+  EXPECT_EQ(j["counts"]["surface_triangles"], 12);
+  EXPECT_GT(j["counts"]["tets"].get<int>(), 20);
+  EXPECT_GT(j["counts"]["elements"].get<int>(), 8);
+  EXPECT_EQ(j["surface"]["closed"], true);
+  EXPECT_EQ(j["surface"]["self_intersecting"], false);
+  EXPECT_EQ(j["surface"]["components"], 1);
+  // 10 mm cube, scaled to metres: exactly 1e-6 m^3 by the divergence theorem.
+  EXPECT_NEAR(j["surface"]["rest_volume_m3"].get<double>(), 1e-6, 1e-18);
+  // Clamped at the bottom, the top sags under gravity.
+  const double dz = j["probes"]["top"]["displacement"][2].get<double>();
+  EXPECT_LT(dz, 0.0);
+  EXPECT_GT(dz, -1e-3);
+  // The run wrote one cache entry; a second run reads it and reports the same numbers.
+  int entries = 0;
+  for (const auto& e : fs::recursive_directory_iterator(m_dir / "cache")) entries += e.is_regular_file();
+  EXPECT_EQ(entries, 1);
+  const json first = j;
+  ASSERT_EQ(run(scene("cube.obj")).exit_code, 0);
+  const json second = report();
+  EXPECT_EQ(first["counts"], second["counts"]);
+  EXPECT_EQ(first["probes"], second["probes"]);
+}
+
+TEST_F(CliMeshTest, InvertedMeshIsReorientedWithAWarning) {
+  write("inverted.obj", cube_obj(true));
+  ASSERT_EQ(run(scene("inverted.obj")).exit_code, 0);
+  const json j = report();
+  EXPECT_NEAR(j["surface"]["rest_volume_m3"].get<double>(), 1e-6, 1e-18);
+  bool warned = false;
+  for (const auto& w : j["warnings"]) warned = warned || w.get<std::string>().find("reoriented") != std::string::npos;
+  EXPECT_TRUE(warned) << j["warnings"].dump();
+}
+
+TEST_F(CliMeshTest, BadMeshesAndParametersAreBadInput) {
+  // Missing file.
+  CommandResult r = run(scene("missing.obj"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("/object/surface"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("missing.obj"), std::string::npos) << r.output;
+  // An open mesh: the cube without its last triangle.
+  std::string open = cube_obj(false);
+  open.erase(open.rfind("f "));
+  write("open.obj", open);
+  r = run(scene("open.obj"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("/object/surface"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("open.obj"), std::string::npos) << r.output;
+  // A cell size that would ask for billions of tets.
+  write("cube.obj", cube_obj(false));
+  r = run(scene("cube.obj", "1e-6"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("/object/material_graph/cell_size"), std::string::npos) << r.output;
+  // Nothing was run, so no report.
+  EXPECT_FALSE(fs::exists(m_dir / "out" / "report.json"));
+}
+
+}  // namespace

@@ -1,0 +1,155 @@
+#pragma once
+// The Z-curve surface embedding (SPEC §2.4, paper §4.5, Fig. 5): every rest vertex of S carries the Morton code of the
+// finest grid cell that holds it; the (code, vertex) pairs are kept sorted, so the vertices of a leaf are one
+// contiguous range found by two binary searches. Each vertex is bound to a leaf by 8 trilinear weights, which are
+// precomposed through the prolongation P into a short list of (DOF, weight) pairs.
+#include <array>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "octocut/sim/object.hpp"
+#include "octocut/sim/octree.hpp"
+#include "octocut/sim/parallel.hpp"
+#include "octocut/sim/types.hpp"
+
+namespace octocut::sim {
+
+/// One entry of the Z-curve list: a vertex and the Morton code of the finest grid cell that holds its rest position.
+struct ZEntry {
+  std::uint64_t code = 0;  ///< 63-bit Morton code, 21 bits per axis, same convention as Cell::morton()
+  std::int32_t vertex = 0; ///< vertex index
+  friend bool operator==(const ZEntry&, const ZEntry&) = default;
+  friend bool operator<(const ZEntry& a, const ZEntry& b) {
+    return a.code < b.code || (a.code == b.code && a.vertex < b.vertex);
+  }
+};
+
+/// The finest grid cell that holds rest point X (m): floor of its fixed-point coordinates, clamped into the root.
+GridPoint zcurve_cell(const RootGeometry& root, const Vec3& rest);
+/// Morton code of zcurve_cell(root, rest).
+std::uint64_t zcurve_code(const RootGeometry& root, const Vec3& rest);
+
+/// The sorted list of (Morton code, vertex) pairs of a vertex set.
+class ZCurveList {
+ public:
+  ZCurveList() = default;
+  /// Encodes and sorts the rest positions (|V|), m. Throws std::invalid_argument naming the first non-finite vertex.
+  ZCurveList(const RootGeometry& root, std::span<const Vec3> rest);
+
+  /// The entries sorted by (code, vertex) (|V|).
+  [[nodiscard]] const std::vector<ZEntry>& entries() const { return m_entries; }
+  [[nodiscard]] int size() const { return int(m_entries.size()); }
+  [[nodiscard]] const RootGeometry& root() const { return m_root; }
+  /// The entries whose finest cell lies inside cell c: a contiguous range, found by two binary searches.
+  [[nodiscard]] std::span<const ZEntry> in_cell(const Cell& c) const;
+
+  /// Deletes the vertices `removed` (old indices, any order, no duplicates), renumbers the kept vertices in their
+  /// old order to 0..k-1, and inserts `inserted_rest` (m) as vertices k, k+1, ... If their number n' is below
+  /// n / (log2 n - 1), n being the number of kept entries, each is inserted by binary search; otherwise they are
+  /// sorted and merged. Returns the old-to-new index map, -1 for a removed vertex (old size). Throws
+  /// std::invalid_argument for an index out of range, a duplicate, or a non-finite inserted point.
+  std::vector<int> update(std::span<const int> removed, std::span<const Vec3> inserted_rest);
+  /// True when the last update() took the sort-and-merge branch.
+  [[nodiscard]] bool last_update_merged() const { return m_merged; }
+
+ private:
+  RootGeometry m_root;
+  std::vector<ZEntry> m_entries;  ///< sorted by (code, vertex) (|V|)
+  bool m_merged = false;
+};
+
+/// A rest point bound to a leaf by 8 weights of the leaf's corners (corner bits as in Cell::corner).
+struct VertexEmbedding {
+  int leaf = -1;                       ///< leaf index in the tree
+  std::array<double, 8> weights{};     ///< trilinear weights, dimensionless, sum 1
+  bool fallback = false;               ///< true when the point lies in no leaf and was bound to the nearest one
+  friend bool operator==(const VertexEmbedding&, const VertexEmbedding&) = default;
+};
+
+/// Smallest and largest weight a fallback vertex may carry.
+inline constexpr double kFallbackWeightMin = -0.5;
+inline constexpr double kFallbackWeightMax = 1.5;
+
+/// Binds rest point X (m) to the leaf that contains its finest cell, with trilinear weights. A point in no leaf
+/// falls back to the nearest leaf (distance from X to the leaf box; ties go to the lower leaf index) with
+/// extrapolated trilinear weights, projected onto [kFallbackWeightMin, kFallbackWeightMax]^8 with sum 1 (a common
+/// shift, then clamping). Throws std::invalid_argument when the tree has no leaf.
+VertexEmbedding embed_vertex(const Octree& tree, const RootGeometry& root, const Vec3& rest);
+
+/// Projects weights onto {w in [kFallbackWeightMin, kFallbackWeightMax]^8, sum w = 1}; weights already inside are
+/// returned unchanged.
+std::array<double, 8> clamp_fallback_weights(const std::array<double, 8>& w);
+
+/// A change of the surface after a cut: the vertices that go, the vertices that come, and the new triangles.
+struct SurfaceEdit {
+  std::vector<int> removed_vertices;                 ///< old vertex indices, any order, no duplicates
+  std::vector<Vec3> inserted_rest;                   ///< new vertices, m; they get indices k, k+1, ... after the k kept ones
+  std::vector<std::array<int32_t, 3>> triangles;     ///< the complete new triangle list, in new vertex indices (|F'|)
+  std::vector<int> changed_leaves;                   ///< leaves of the new tree whose vertices must be re-embedded
+};
+
+/// The surface S bound to an object model (constant per model revision; the deformed DOF positions come per step).
+class SurfaceEmbedding {
+ public:
+  /// Embeds the rest vertices (|V|, m) and triangles (|F|) of S in `model`. Throws std::invalid_argument naming the
+  /// offending vertex or triangle for a non-finite vertex or a triangle index out of range.
+  SurfaceEmbedding(const ObjectModel& model, std::vector<Vec3> rest, std::vector<std::array<int32_t, 3>> triangles);
+
+  [[nodiscard]] int num_vertices() const { return int(m_rest.size()); }
+  [[nodiscard]] const std::vector<Vec3>& rest_vertices() const { return m_rest; }          ///< m (|V|)
+  [[nodiscard]] const std::vector<std::array<int32_t, 3>>& triangles() const { return m_triangles; }  ///< (|F|)
+  [[nodiscard]] const ZCurveList& zcurve() const { return m_zcurve; }
+  /// The Z-curve entries of the vertices inside leaf `leaf` of the current model's tree.
+  [[nodiscard]] std::span<const ZEntry> vertices_in_leaf(int leaf) const;
+  [[nodiscard]] const std::vector<VertexEmbedding>& embeddings() const { return m_embedding; }  ///< (|V|)
+  /// Number of vertices bound by the fallback rule.
+  [[nodiscard]] int num_fallback() const;
+  /// Composed weights, CSR over vertices: vertex v is sum of weight[i] * x[dof[i]] for i in [begin[v], begin[v+1]).
+  [[nodiscard]] const std::vector<int>& dof_begin() const { return m_begin; }      ///< (|V| + 1)
+  [[nodiscard]] const std::vector<int>& dof_index() const { return m_dof; }        ///< (nnz)
+  [[nodiscard]] const std::vector<double>& dof_weight() const { return m_weight; } ///< dimensionless (nnz)
+
+  /// Deformed vertex positions (|V|, m) from DOF positions (num_dofs, m), parallel over vertices.
+  void deformed_positions(const std::vector<Vec3>& x_dofs, std::vector<Vec3>& positions, Executor& exec) const;
+  /// Area-weighted unit vertex normals (|V|) of the mesh at `positions` (|V|, m), parallel over vertices; equal bit
+  /// for bit to sim::vertex_normals(positions, triangles()).
+  void deformed_normals(const std::vector<Vec3>& positions, std::vector<Vec3>& normals, Executor& exec) const;
+
+  /// Applies a cut: removes and inserts vertices (ZCurveList::update), replaces the triangles, re-embeds only the
+  /// new vertices, the vertices of leaves that are new in `new_model` or listed in edit.changed_leaves, the vertices
+  /// whose old leaf is gone, and the fallback vertices; then recomposes every vertex through the new P. The result
+  /// equals a fresh SurfaceEmbedding of the new surface in `new_model`. Returns the old-to-new vertex map (-1 for a
+  /// removed vertex). Throws std::invalid_argument for bad indices or a model with another root cube; the embedding
+  /// is unchanged then.
+  std::vector<int> update(const ObjectModel& new_model, const SurfaceEdit& edit);
+  /// Moves to a new revision of the model with the same surface (refinement).
+  void rebind(const ObjectModel& new_model);
+
+  /// True when the last update() merged a sorted batch instead of inserting one by one.
+  [[nodiscard]] bool last_update_merged() const { return m_zcurve.last_update_merged(); }
+  /// Number of vertices the last update() or rebind() re-embedded.
+  [[nodiscard]] int last_reembedded() const { return m_last_reembedded; }
+
+ private:
+  // Re-embeds the vertices flagged in `redo` in the tree `tree` (all when redo is empty) and recomposes everything.
+  void embed_and_compose(const ObjectModel& model, const std::vector<char>& redo);
+  void build_adjacency();
+  void check_triangles(const std::vector<std::array<int32_t, 3>>& triangles, std::size_t num_vertices) const;
+
+  RootGeometry m_root;
+  Octree m_tree;                                   ///< the tree of the model the vertices are bound to
+  std::vector<Vec3> m_rest;                        ///< rest positions, m (|V|)
+  std::vector<std::array<int32_t, 3>> m_triangles; ///< (|F|)
+  ZCurveList m_zcurve;                             ///< (|V|)
+  std::vector<VertexEmbedding> m_embedding;        ///< (|V|)
+  std::vector<int> m_begin;                        ///< CSR row starts of the composed weights (|V| + 1)
+  std::vector<int> m_dof;                          ///< DOF of each entry (nnz)
+  std::vector<double> m_weight;                    ///< weight of each entry, dimensionless (nnz)
+  std::vector<int> m_tri_begin;                    ///< vertex-to-triangle CSR row starts (|V| + 1)
+  std::vector<int> m_tri;                          ///< incident triangles of each vertex, ascending (3 |F|)
+  int m_num_dofs = 0;                              ///< DOFs of the bound model
+  int m_last_reembedded = 0;
+};
+
+}  // namespace octocut::sim

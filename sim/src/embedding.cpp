@@ -1,0 +1,404 @@
+#include "octocut/sim/embedding.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace octocut::sim {
+
+namespace {
+
+// "vertex 12 (nan, 0, 1)"-style description of a point, for error messages.
+std::string describe_point(const char* what, std::size_t i, const Vec3& p) {
+  return std::string(what) + " " + std::to_string(i) + " (" + std::to_string(p.x()) + ", " + std::to_string(p.y()) +
+         ", " + std::to_string(p.z()) + ")";
+}
+
+// Throws when an index list has an entry outside [0, n) or a duplicate; `what` names the list.
+void check_index_list(std::span<const int> list, std::size_t n, const char* what) {
+  std::vector<char> seen(n, 0);
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const int v = list[i];
+    if (v < 0 || std::size_t(v) >= n)
+      throw std::invalid_argument(std::string(what) + "[" + std::to_string(i) + "] = " + std::to_string(v) +
+                                  " is out of range [0, " + std::to_string(n) + ")");
+    if (seen[std::size_t(v)])
+      throw std::invalid_argument(std::string(what) + "[" + std::to_string(i) + "] = " + std::to_string(v) +
+                                  " is listed twice");
+    seen[std::size_t(v)] = 1;
+  }
+}
+
+// Throws naming the first non-finite point; `what` names the list.
+void check_finite(std::span<const Vec3> points, const char* what) {
+  for (std::size_t i = 0; i < points.size(); ++i)
+    if (!points[i].allFinite()) throw std::invalid_argument(describe_point(what, i, points[i]) + " is not finite");
+}
+
+// Squared distance from p to the closed box b, m^2.
+double box_distance2(const Box3& b, const Vec3& p) {
+  const Vec3 d = (b.min - p).cwiseMax(p - b.max).cwiseMax(0.0);
+  return d.squaredNorm();
+}
+
+// Local coordinates of p in leaf box b: 0 at the lower corner and 1 at the upper one along each axis.
+Vec3 local_coordinates(const Box3& b, const Vec3& p) {
+  return ((p - b.min).array() / (b.max - b.min).array()).matrix();
+}
+
+// For each leaf of `old_tree`, its index in `tree` when the same cell is a leaf there, else -1. Both trees are in
+// Morton order, so one merge pass suffices.
+std::vector<int> match_leaves(const Octree& old_tree, const Octree& tree, std::vector<char>& kept_new) {
+  std::vector<int> old_to_new(std::size_t(old_tree.size()), -1);
+  kept_new.assign(std::size_t(tree.size()), 0);
+  int i = 0, j = 0;
+  while (i < old_tree.size() && j < tree.size()) {
+    const std::uint64_t ci = old_tree.leaf(i).morton(), cj = tree.leaf(j).morton();
+    if (ci == cj) {
+      if (old_tree.leaf(i).level == tree.leaf(j).level) {
+        old_to_new[std::size_t(i)] = j;
+        kept_new[std::size_t(j)] = 1;
+      }
+      ++i;
+      ++j;
+    } else if (ci < cj) {
+      ++i;
+    } else {
+      ++j;
+    }
+  }
+  return old_to_new;
+}
+
+}  // namespace
+
+GridPoint zcurve_cell(const RootGeometry& root, const Vec3& rest) {
+  // Fixed point on the finest grid, floored and clamped to the last cell, so the upper root faces stay inside.
+  const Vec3 g = (rest - root.min) / root.unit();
+  auto to_int = [](double v) {
+    return std::uint32_t(std::clamp(std::floor(v), 0.0, double(kGridCells - 1)));
+  };
+  return {to_int(g.x()), to_int(g.y()), to_int(g.z())};
+}
+
+std::uint64_t zcurve_code(const RootGeometry& root, const Vec3& rest) {
+  const GridPoint c = zcurve_cell(root, rest);
+  return morton_encode(c.x, c.y, c.z);
+}
+
+ZCurveList::ZCurveList(const RootGeometry& root, std::span<const Vec3> rest) : m_root(root) {
+  check_finite(rest, "vertex");
+  // Encode every vertex, then sort by (code, vertex).
+  m_entries.resize(rest.size());
+  for (std::size_t i = 0; i < rest.size(); ++i) m_entries[i] = {zcurve_code(root, rest[i]), std::int32_t(i)};
+  std::sort(m_entries.begin(), m_entries.end());
+}
+
+std::span<const ZEntry> ZCurveList::in_cell(const Cell& c) const {
+  // A cell covers the Morton codes [code(anchor), code(anchor) + size^3).
+  const std::uint64_t s = c.size();
+  const std::uint64_t lo = c.morton(), hi = lo + s * s * s;
+  const auto by_code = [](const ZEntry& e, std::uint64_t code) { return e.code < code; };
+  const auto b = std::lower_bound(m_entries.begin(), m_entries.end(), lo, by_code);
+  const auto e = std::lower_bound(b, m_entries.end(), hi, by_code);
+  return {m_entries.data() + (b - m_entries.begin()), std::size_t(e - b)};
+}
+
+std::vector<int> ZCurveList::update(std::span<const int> removed, std::span<const Vec3> inserted_rest) {
+  const std::size_t n_old = m_entries.size();
+  check_index_list(removed, n_old, "removed_vertices");
+  check_finite(inserted_rest, "inserted vertex");
+
+  // Old-to-new map: kept vertices keep their relative order.
+  std::vector<int> map(n_old, 0);
+  for (const int v : removed) map[std::size_t(v)] = -1;
+  int next = 0;
+  for (int& m : map) m = m < 0 ? -1 : next++;
+
+  // Delete and renumber in one stable pass; the map is monotone, so the list stays sorted by (code, vertex).
+  std::size_t out = 0;
+  for (std::size_t i = 0; i < n_old; ++i) {
+    const int v = map[std::size_t(m_entries[i].vertex)];
+    if (v < 0) continue;
+    m_entries[out++] = {m_entries[i].code, v};
+  }
+  m_entries.resize(out);
+
+  // The new entries, numbered after the kept vertices.
+  const std::size_t n = out, n_new = inserted_rest.size();
+  std::vector<ZEntry> added(n_new);
+  for (std::size_t i = 0; i < n_new; ++i)
+    added[i] = {zcurve_code(m_root, inserted_rest[i]), std::int32_t(n + i)};
+
+  // Paper §4.5: one by one when n' < n / (log2 n - 1), else sort the batch and merge.
+  const double denom = std::log2(double(std::max<std::size_t>(n, 2))) - 1.0;
+  const bool one_by_one = denom <= 0.0 || double(n_new) < double(n) / denom;
+  m_merged = !one_by_one;
+  if (one_by_one) {
+    m_entries.reserve(n + n_new);
+    for (const ZEntry& e : added) m_entries.insert(std::upper_bound(m_entries.begin(), m_entries.end(), e), e);
+  } else {
+    std::sort(added.begin(), added.end());
+    std::vector<ZEntry> merged(n + n_new);
+    std::merge(m_entries.begin(), m_entries.end(), added.begin(), added.end(), merged.begin());
+    m_entries = std::move(merged);
+  }
+  return map;
+}
+
+std::array<double, 8> clamp_fallback_weights(const std::array<double, 8>& w) {
+  const double lo = kFallbackWeightMin, hi = kFallbackWeightMax;
+  if (std::all_of(w.begin(), w.end(), [&](double v) { return v >= lo && v <= hi; })) return w;
+  // Sum of the shifted, clamped weights; it falls monotonically with the shift.
+  auto shifted_sum = [&](double shift) {
+    double s = 0.0;
+    for (const double v : w) s += std::clamp(v - shift, lo, hi);
+    return s;
+  };
+  // Bisection on the shift: at a the sum is 8 hi > 1, at b it is 8 lo < 1.
+  double a = *std::min_element(w.begin(), w.end()) - hi, b = *std::max_element(w.begin(), w.end()) - lo;
+  for (int it = 0; it < 200 && b - a > 0.0; ++it) {
+    const double m = 0.5 * (a + b);
+    if (m <= a || m >= b) break;
+    (shifted_sum(m) > 1.0 ? a : b) = m;
+  }
+  // With the clamped set known, solve for the shift exactly on the free weights.
+  const double shift0 = 0.5 * (a + b);
+  double fixed = 0.0, free_sum = 0.0;
+  int free_count = 0;
+  for (const double v : w) {
+    const double s = v - shift0;
+    if (s <= lo) {
+      fixed += lo;
+    } else if (s >= hi) {
+      fixed += hi;
+    } else {
+      free_sum += v;
+      ++free_count;
+    }
+  }
+  const double shift = free_count > 0 ? (free_sum + fixed - 1.0) / double(free_count) : shift0;
+  std::array<double, 8> out{};
+  for (std::size_t k = 0; k < 8; ++k) out[k] = std::clamp(w[k] - shift, lo, hi);
+  return out;
+}
+
+VertexEmbedding embed_vertex(const Octree& tree, const RootGeometry& root, const Vec3& rest) {
+  if (tree.size() == 0) throw std::invalid_argument("embed_vertex: the octree has no leaf");
+  VertexEmbedding e;
+  // Inside the root cube: the leaf that holds the vertex's finest cell, a binary search on the leaf codes.
+  const Box3 root_box{root.min, root.min + Vec3::Constant(root.size)};
+  if (root_box.contains(rest)) e.leaf = tree.locate_cell(zcurve_cell(root, rest));
+  if (e.leaf >= 0) {
+    e.weights = trilinear_weights(local_coordinates(root.cell_box(tree.leaf(e.leaf)), rest));
+    return e;
+  }
+  // Fallback: the nearest leaf box, the lower index on ties, with extrapolated weights kept in range.
+  double best = std::numeric_limits<double>::infinity();
+  for (int i = 0; i < tree.size(); ++i) {
+    const double d = box_distance2(root.cell_box(tree.leaf(i)), rest);
+    if (d < best) {
+      best = d;
+      e.leaf = i;
+    }
+  }
+  e.fallback = true;
+  e.weights = clamp_fallback_weights(trilinear_weights(local_coordinates(root.cell_box(tree.leaf(e.leaf)), rest)));
+  return e;
+}
+
+SurfaceEmbedding::SurfaceEmbedding(const ObjectModel& model, std::vector<Vec3> rest,
+                                   std::vector<std::array<int32_t, 3>> triangles)
+    : m_root(model.root()), m_tree(model.tree()), m_rest(std::move(rest)), m_triangles(std::move(triangles)) {
+  check_triangles(m_triangles, m_rest.size());
+  m_zcurve = ZCurveList(m_root, m_rest);
+  m_embedding.assign(m_rest.size(), VertexEmbedding{});
+  embed_and_compose(model, {});
+  m_last_reembedded = num_vertices();
+  build_adjacency();
+}
+
+std::span<const ZEntry> SurfaceEmbedding::vertices_in_leaf(int leaf) const {
+  if (leaf < 0 || leaf >= m_tree.size())
+    throw std::out_of_range("SurfaceEmbedding::vertices_in_leaf: leaf " + std::to_string(leaf) + " out of range");
+  return m_zcurve.in_cell(m_tree.leaf(leaf));
+}
+
+int SurfaceEmbedding::num_fallback() const {
+  return int(std::count_if(m_embedding.begin(), m_embedding.end(), [](const auto& e) { return e.fallback; }));
+}
+
+void SurfaceEmbedding::check_triangles(const std::vector<std::array<int32_t, 3>>& triangles,
+                                       std::size_t num_vertices) const {
+  for (std::size_t t = 0; t < triangles.size(); ++t)
+    for (int k = 0; k < 3; ++k) {
+      const int32_t v = triangles[t][std::size_t(k)];
+      if (v < 0 || std::size_t(v) >= num_vertices)
+        throw std::invalid_argument("triangle " + std::to_string(t) + " corner " + std::to_string(k) + " = " +
+                                    std::to_string(v) + " is out of range [0, " + std::to_string(num_vertices) + ")");
+    }
+}
+
+void SurfaceEmbedding::embed_and_compose(const ObjectModel& model, const std::vector<char>& redo) {
+  const std::size_t nv = m_rest.size();
+  // Re-embed the flagged vertices (all of them when no flags are given).
+  for (std::size_t v = 0; v < nv; ++v)
+    if (redo.empty() || redo[v]) m_embedding[v] = embed_vertex(m_tree, m_root, m_rest[v]);
+
+  // Compose through P: vertex v = sum_k w_k (P x)_(8 leaf + k), entries of one DOF summed in slot order.
+  const DofMap& P = model.dofs();
+  m_begin.assign(nv + 1, 0);
+  m_dof.clear();
+  m_weight.clear();
+  m_dof.reserve(nv * 8);
+  m_weight.reserve(nv * 8);
+  std::vector<std::pair<int, double>> acc;
+  for (std::size_t v = 0; v < nv; ++v) {
+    const VertexEmbedding& e = m_embedding[v];
+    acc.clear();
+    for (int k = 0; k < 8; ++k) {
+      const double w = e.weights[std::size_t(k)];
+      if (w == 0.0) continue;
+      const std::size_t s = 8 * std::size_t(e.leaf) + std::size_t(k);
+      for (int i = P.slot_begin[s]; i < P.slot_begin[s + 1]; ++i)
+        acc.emplace_back(P.slot_dof[std::size_t(i)], w * P.slot_weight[std::size_t(i)]);
+    }
+    // Group by DOF, keeping the slot order within a DOF, and sum.
+    std::stable_sort(acc.begin(), acc.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    for (std::size_t i = 0; i < acc.size();) {
+      double w = 0.0;
+      std::size_t j = i;
+      for (; j < acc.size() && acc[j].first == acc[i].first; ++j) w += acc[j].second;
+      if (w != 0.0) {
+        m_dof.push_back(acc[i].first);
+        m_weight.push_back(w);
+      }
+      i = j;
+    }
+    m_begin[v + 1] = int(m_dof.size());
+  }
+  m_num_dofs = model.num_dofs();
+}
+
+void SurfaceEmbedding::build_adjacency() {
+  // Vertex-to-triangle CSR; a triangle appears once per corner it has at the vertex, triangles ascending.
+  const std::size_t nv = m_rest.size();
+  m_tri_begin.assign(nv + 1, 0);
+  for (const auto& t : m_triangles)
+    for (const int32_t v : t) ++m_tri_begin[std::size_t(v) + 1];
+  for (std::size_t v = 0; v < nv; ++v) m_tri_begin[v + 1] += m_tri_begin[v];
+  m_tri.assign(std::size_t(m_tri_begin[nv]), 0);
+  std::vector<int> fill(m_tri_begin.begin(), m_tri_begin.end() - 1);
+  for (std::size_t t = 0; t < m_triangles.size(); ++t)
+    for (const int32_t v : m_triangles[t]) m_tri[std::size_t(fill[std::size_t(v)]++)] = int(t);
+}
+
+void SurfaceEmbedding::deformed_positions(const std::vector<Vec3>& x_dofs, std::vector<Vec3>& positions,
+                                          Executor& exec) const {
+  if (int(x_dofs.size()) != m_num_dofs)
+    throw std::invalid_argument("SurfaceEmbedding::deformed_positions: " + std::to_string(x_dofs.size()) +
+                                " DOF positions for a model with " + std::to_string(m_num_dofs) + " DOFs");
+  positions.resize(m_rest.size());
+  // Each vertex is written by exactly one task: the result does not depend on the thread count.
+  exec.parallel_for(num_vertices(), 2048, [&](int begin, int end) {
+    for (int v = begin; v < end; ++v) {
+      Vec3 p = Vec3::Zero();
+      for (int i = m_begin[std::size_t(v)]; i < m_begin[std::size_t(v) + 1]; ++i)
+        p += m_weight[std::size_t(i)] * x_dofs[std::size_t(m_dof[std::size_t(i)])];
+      positions[std::size_t(v)] = p;
+    }
+  });
+}
+
+void SurfaceEmbedding::deformed_normals(const std::vector<Vec3>& positions, std::vector<Vec3>& normals,
+                                        Executor& exec) const {
+  if (positions.size() != m_rest.size())
+    throw std::invalid_argument("SurfaceEmbedding::deformed_normals: " + std::to_string(positions.size()) +
+                                " positions for " + std::to_string(m_rest.size()) + " vertices");
+  normals.resize(m_rest.size());
+  exec.parallel_for(num_vertices(), 2048, [&](int begin, int end) {
+    for (int v = begin; v < end; ++v) {
+      // Sum the incident face normals (twice the area times the unit normal) in triangle order, then normalise.
+      Vec3 n = Vec3::Zero();
+      for (int i = m_tri_begin[std::size_t(v)]; i < m_tri_begin[std::size_t(v) + 1]; ++i) {
+        const auto& t = m_triangles[std::size_t(m_tri[std::size_t(i)])];
+        const Vec3& a = positions[std::size_t(t[0])];
+        const Vec3 f = (positions[std::size_t(t[1])] - a).cross(positions[std::size_t(t[2])] - a);
+        n += f;
+      }
+      const double len = n.norm();
+      normals[std::size_t(v)] = len > 0.0 ? Vec3(n / len) : Vec3::Zero();
+    }
+  });
+}
+
+std::vector<int> SurfaceEmbedding::update(const ObjectModel& new_model, const SurfaceEdit& edit) {
+  // Validate everything before touching any member, so that a bad edit leaves the embedding as it was.
+  if (new_model.root().min != m_root.min || new_model.root().size != m_root.size)
+    throw std::invalid_argument("SurfaceEmbedding::update: the new model has another root cube");
+  check_index_list(edit.removed_vertices, m_rest.size(), "removed_vertices");
+  check_finite(edit.inserted_rest, "inserted vertex");
+  const std::size_t nv_new = m_rest.size() - edit.removed_vertices.size() + edit.inserted_rest.size();
+  check_triangles(edit.triangles, nv_new);
+  for (std::size_t i = 0; i < edit.changed_leaves.size(); ++i) {
+    const int l = edit.changed_leaves[i];
+    if (l < 0 || l >= new_model.tree().size())
+      throw std::invalid_argument("changed_leaves[" + std::to_string(i) + "] = " + std::to_string(l) +
+                                  " is out of range [0, " + std::to_string(new_model.tree().size()) + ")");
+  }
+
+  // The Z-curve list: delete, renumber, insert.
+  const std::vector<int> map = m_zcurve.update(edit.removed_vertices, edit.inserted_rest);
+
+  // Leaves kept from the old tree keep their vertices' weights, renumbered.
+  std::vector<char> kept_new;
+  const std::vector<int> old_to_new = match_leaves(m_tree, new_model.tree(), kept_new);
+  std::vector<Vec3> rest(nv_new);
+  std::vector<VertexEmbedding> embedding(nv_new);
+  std::vector<char> redo(nv_new, 0);
+  for (std::size_t v = 0; v < map.size(); ++v) {
+    const int nvx = map[v];
+    if (nvx < 0) continue;
+    rest[std::size_t(nvx)] = m_rest[v];
+    VertexEmbedding e = m_embedding[v];
+    const int leaf = old_to_new[std::size_t(e.leaf)];
+    if (e.fallback || leaf < 0) {
+      redo[std::size_t(nvx)] = 1;
+    } else {
+      e.leaf = leaf;
+      embedding[std::size_t(nvx)] = e;
+    }
+  }
+  const std::size_t kept = nv_new - edit.inserted_rest.size();
+  for (std::size_t i = 0; i < edit.inserted_rest.size(); ++i) {
+    rest[kept + i] = edit.inserted_rest[i];
+    redo[kept + i] = 1;
+  }
+
+  // Vertices of new or changed leaves: two binary searches per leaf on the Z-curve list.
+  for (int j = 0; j < new_model.tree().size(); ++j)
+    if (!kept_new[std::size_t(j)])
+      for (const ZEntry& z : m_zcurve.in_cell(new_model.tree().leaf(j))) redo[std::size_t(z.vertex)] = 1;
+  for (const int j : edit.changed_leaves)
+    for (const ZEntry& z : m_zcurve.in_cell(new_model.tree().leaf(j))) redo[std::size_t(z.vertex)] = 1;
+
+  // Swap in the new surface and tree, then re-embed the flagged vertices and recompose through the new P.
+  m_rest = std::move(rest);
+  m_embedding = std::move(embedding);
+  m_triangles = edit.triangles;
+  m_tree = new_model.tree();
+  embed_and_compose(new_model, redo);
+  m_last_reembedded = int(std::count(redo.begin(), redo.end(), char(1)));
+  build_adjacency();
+  return map;
+}
+
+void SurfaceEmbedding::rebind(const ObjectModel& new_model) {
+  SurfaceEdit edit;
+  edit.triangles = m_triangles;
+  update(new_model, edit);
+}
+
+}  // namespace octocut::sim

@@ -225,9 +225,12 @@ Entry make_scene_schema() {
                     object("render", {boolean("enabled", false, "Render frames offscreen (EGL).")}, "Rendering."),
                     object("output",
                            {boolean("frames", false, "Write the rendered frames as PNG files."),
-                            boolean("surface_final", false, "Write the final deformed surface."),
+                            boolean("surface_final", false,
+                                    "Write the rest surface and the final deformed surface as binary PLY in metres "
+                                    "(`surface_rest.ply`, `surface_final.ply`)."),
                             integer("surface_every", 0, closed(0, max_int),
-                                    "Write the deformed surface every N steps; 0: never.")},
+                                    "Write the deformed surface every N steps as `surfaces/surface_<step>.ply` "
+                                    "(6 digits, binary PLY, metres), and the rest surface once; 0: never.")},
                            "Files the run writes besides the report."),
                 },
                 "The scene document.");

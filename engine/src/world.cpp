@@ -17,6 +17,8 @@
 #include "octocut/engine/material_graph_cache.hpp"
 #include "octocut/engine/mesh_io.hpp"
 #include "octocut/engine/scene_loader.hpp"
+#include "octocut/sim/embedding.hpp"
+#include "octocut/sim/parallel.hpp"
 #include "octocut/sim/surface_check.hpp"
 #include "report.hpp"
 
@@ -225,8 +227,20 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
         std::none_of(m.dof_handle().begin(), m.dof_handle().end(), [](int h) { return h >= 0; }))
       report.warnings.push_back("/solver/mode: a static solve with no handle holding the object has no unique "
                                 "equilibrium (rigid motions are free)");
+    // S embedded in T by the Z-curve list (SPEC §2.4); the deformed surface follows the DOFs.
+    sim::Executor surface_exec(scene.solver.threads);
+    const sim::SurfaceEmbedding embedding(m, surface.vertices, surface.triangles);
+    if (embedding.num_fallback() > 0)
+      report.warnings.push_back(std::to_string(embedding.num_fallback()) +
+                                " surface vertices lie outside every leaf and are bound to the nearest one");
+    std::vector<sim::Vec3> deformed;
+    auto write_surface = [&](const fs::path& path) {
+      embedding.deformed_positions(sim.state().x, deformed, surface_exec);
+      write_file_atomic(path, encode_ply_binary(sim::TriMesh{deformed, surface.triangles}));
+    };
     if (scene.output.surface_final || scene.output.surface_every > 0)
-      report.warnings.push_back("/output: surface output needs an embedded mesh surface (geometry issue); none written");
+      write_file_atomic(out / "surface_rest.ply", encode_ply_binary(surface));
+    if (scene.output.surface_every > 0) fs::create_directories(out / "surfaces");
     if (scene.output.frames && options.no_render)
       report.warnings.push_back("/output/frames: --no-render given, no frames written");
 
@@ -240,6 +254,11 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
       sim.step();
       step_ms.push_back(ms_since(t0));
       report.steps = i + 1;
+      if (scene.output.surface_every > 0 && (i + 1) % scene.output.surface_every == 0) {
+        char name[32];
+        std::snprintf(name, sizeof(name), "surface_%06ld.ply", i + 1);
+        write_surface(out / "surfaces" / name);
+      }
       if (tty && (ms_since(last_progress) > 200.0 || i + 1 == steps)) {
         last_progress = Clock::now();
         std::fprintf(stderr, "\r[octocut] step %ld/%ld  t = %.4f s  %.2f ms/step   ", i + 1, steps, sim.state().t,
@@ -274,6 +293,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
     if (st.newton_unconverged > 0)
       report.warnings.push_back(std::to_string(st.newton_unconverged) + " static solves stopped unconverged");
     if (!finite) throw std::runtime_error("the state is not finite");
+    if (scene.output.surface_final) write_surface(out / "surface_final.ply");
   } catch (const std::exception& e) {
     report.status = "failed";
     report.error = e.what();

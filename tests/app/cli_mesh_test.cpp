@@ -11,6 +11,7 @@
 #include <string>
 
 #include "cli_util.hpp"
+#include "octocut/engine/mesh_io.hpp"
 
 namespace {
 
@@ -52,7 +53,8 @@ class CliMeshTest : public ::testing::Test {
     std::ofstream(p) << text;
     return p;
   }
-  // A scene on surface file `mesh` (mm), clamped at z < 1 mm, with the given extra object keys.
+  // A scene on surface file `mesh` (mm), clamped at z < 1.5 mm (the whole bottom layer of leaves: root 10.5 mm at
+  // level 3 puts the first node layer above z = 0 at 1.06 mm).
   fs::path scene(const std::string& mesh, const std::string& cell_size = "0.002") {
     return write("scene.json", R"({
       "name": "mesh cube", "duration": 0.02,
@@ -61,7 +63,7 @@ class CliMeshTest : public ::testing::Test {
                  "material": {"young_modulus": 5e4, "poisson_ratio": 0.45},
                  "material_graph": {"cell_size": )" + cell_size + R"(},
                  "octree": {"base_level": 3},
-                 "handles": [{"box": {"min": [-1, -1, -1], "max": [1, 1, 0.001]}}]},
+                 "handles": [{"box": {"min": [-1, -1, -1], "max": [1, 1, 0.0015]}}]},
       "probes": [{"name": "top", "point": [0.005, 0.005, 0.0099]}]
     })");
   }
@@ -103,6 +105,36 @@ TEST_F(CliMeshTest, MeshSurfaceRunsEndToEndAndTheCacheIsUsed) {
   const json second = report();
   EXPECT_EQ(first["counts"], second["counts"]);
   EXPECT_EQ(first["probes"], second["probes"]);
+}
+
+TEST_F(CliMeshTest, SurfaceOutputsAreTheRestAndDeformedSurfaces) {
+  write("cube.obj", cube_obj(false));
+  const fs::path s = scene("cube.obj");
+  const CommandResult r = run_octocut("run '" + s.string() + "' --out '" + (m_dir / "out").string() +
+                                      "' --quiet --set /output/surface_final=true --set /output/surface_every=10");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const fs::path out = m_dir / "out";
+  EXPECT_TRUE(fs::exists(out / "surfaces" / "surface_000010.ply"));
+  EXPECT_TRUE(fs::exists(out / "surfaces" / "surface_000020.ply"));
+  EXPECT_FALSE(fs::exists(out / "surfaces" / "surface_000005.ply"));
+  // The rest surface is the input in metres (float32 in the file).
+  const octocut::sim::TriMesh rest = octocut::engine::load_mesh(out / "surface_rest.ply").mesh;
+  const octocut::sim::TriMesh final_surface = octocut::engine::load_mesh(out / "surface_final.ply").mesh;
+  ASSERT_EQ(rest.num_vertices(), 8u);
+  ASSERT_EQ(final_surface.num_vertices(), 8u);
+  EXPECT_NEAR(octocut::sim::signed_volume(rest), 1e-6, 1e-12);
+  for (std::size_t v = 0; v < 8; ++v) {
+    const auto& p = rest.vertices[v];
+    const auto& q = final_surface.vertices[v];
+    if (p.z() < 1e-9) {
+      // The clamped bottom does not move.
+      EXPECT_NEAR((q - p).norm(), 0.0, 1e-9) << v;
+    } else {
+      // The free top sags under gravity, by less than a millimetre.
+      EXPECT_LT(q.z(), p.z()) << v;
+      EXPECT_GT(q.z(), p.z() - 1e-3) << v;
+    }
+  }
 }
 
 TEST_F(CliMeshTest, InvertedMeshIsReorientedWithAWarning) {

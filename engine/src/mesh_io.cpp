@@ -6,10 +6,14 @@
 #include <assimp/scene.h>
 
 #include <algorithm>
+#include <cctype>
 #include <charconv>
 #include <cmath>
+#include <cstdint>
 #include <memory>
 #include <numeric>
+#include <optional>
+#include <stdexcept>
 #include <system_error>
 #include <utility>
 
@@ -54,7 +58,7 @@ std::string format_point(const sim::Vec3& p) {
   return "(" + format_number(p.x()) + ", " + format_number(p.y()) + ", " + format_number(p.z()) + ")";
 }
 
-/// Appends every triangle of the node tree under `root` to `positions` (file units, node transforms applied) and
+/// Appends every triangle of the scene's node tree to `positions` (file units, node transforms applied) and
 /// `triangles` (indices into `positions`). Nodes are visited depth first in child order; a node whose transform
 /// mirrors space gets its triangles reversed so that they keep their outward orientation.
 void gather_triangles(const aiScene& scene, const std::string& file, std::vector<sim::Vec3>& positions,
@@ -166,7 +170,8 @@ std::string format_triangle(const sim::TriMesh& mesh, std::size_t f) {
 /// Lower-case extension of `path`, with the dot (".ply").
 std::string lower_extension(const fs::path& path) {
   std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   return ext;
 }
 
@@ -199,7 +204,8 @@ std::unique_ptr<aiScene> to_assimp_scene(const sim::TriMesh& mesh) {
   out->mVertices = new aiVector3D[mesh.num_vertices()];
   for (std::size_t v = 0; v < mesh.num_vertices(); ++v) {
     const sim::Vec3& p = mesh.vertices[v];
-    out->mVertices[v] = aiVector3D(static_cast<ai_real>(p.x()), static_cast<ai_real>(p.y()), static_cast<ai_real>(p.z()));
+    out->mVertices[v] =
+        aiVector3D(static_cast<ai_real>(p.x()), static_cast<ai_real>(p.y()), static_cast<ai_real>(p.z()));
   }
   out->mNumFaces = static_cast<unsigned>(mesh.num_triangles());
   out->mFaces = new aiFace[mesh.num_triangles()];

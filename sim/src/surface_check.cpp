@@ -98,7 +98,9 @@ SurfaceCheck check_surface(const TriMesh& mesh) {
     if (count == 1 && !check.boundary_edge.found()) check.boundary_edge = offender(uses, first, last, -1);
     if (count > 2) {
       check.edge_manifold = false;
-      if (!check.nonmanifold_edge.found()) check.nonmanifold_edge = offender(uses, first, last, uses[first + 1].triangle);
+      if (!check.nonmanifold_edge.found()) {
+        check.nonmanifold_edge = offender(uses, first, last, uses[first + 1].triangle);
+      }
     }
     if (count == 2 && uses[first].forward == uses[first + 1].forward) {
       check.oriented = false;
@@ -123,7 +125,9 @@ SurfaceCheck check_surface(const TriMesh& mesh) {
     for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
       const auto& t = mesh.triangles[f];
       if (has_repeated_vertex(t)) continue;
-      for (const int32_t v : t) incident[static_cast<std::size_t>(fill[static_cast<std::size_t>(v)]++)] = static_cast<int32_t>(f);
+      for (const int32_t v : t) {
+        incident[static_cast<std::size_t>(fill[static_cast<std::size_t>(v)]++)] = static_cast<int32_t>(f);
+      }
     }
   }
 

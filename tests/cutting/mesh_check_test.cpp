@@ -3,8 +3,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <random>
 #include <stdexcept>
 
 #include "test_meshes.hpp"
@@ -19,6 +21,25 @@ TEST(MeshCheck, ClosedConvexMeshesDoNotSelfIntersect) {
   // Neighbouring triangles share vertices and edges; that is not an intersection.
   EXPECT_FALSE(find_self_intersection(test::octahedron()).has_value());
   EXPECT_FALSE(find_self_intersection(grid_cube(4)).has_value());
+}
+
+TEST(MeshCheck, TriangleOrderDoesNotMatter) {
+  // Surface_mesh is built face by face; a shuffled order must neither fail nor change the answer.
+  std::mt19937 random(11);
+  sim::TriMesh sphere = test::cube_sphere(8);
+  std::shuffle(sphere.triangles.begin(), sphere.triangles.end(), random);
+  EXPECT_FALSE(find_self_intersection(sphere).has_value());
+
+  // For two interpenetrating boxes, reversing the triangle order maps the smallest pair {f, g} of the reversed mesh
+  // back to a pair of the original that brute force confirms.
+  const sim::TriMesh two = merged(grid_cube(2), grid_cube(2, 1.0, sim::Vec3(0.5, 0.37, 0.21)));
+  sim::TriMesh reversed = two;
+  std::reverse(reversed.triangles.begin(), reversed.triangles.end());
+  const auto pair = find_self_intersection(reversed);
+  ASSERT_TRUE(pair.has_value());
+  const auto last = static_cast<int>(two.num_triangles()) - 1;
+  EXPECT_TRUE(test::triangles_intersect(two, static_cast<std::size_t>(last - (*pair)[0]),
+                                        static_cast<std::size_t>(last - (*pair)[1])));
 }
 
 TEST(MeshCheck, DisjointBoxesDoNotIntersect) {

@@ -23,10 +23,9 @@ inline sim::TriMesh octahedron(double r = 1.0) {
     const int iz = (octant & 4) ? 5 : 2;
     std::array<int32_t, 3> t{ix, iy, iz};
     const sim::Vec3& a = mesh.vertices[static_cast<std::size_t>(t[0])];
-    const sim::Vec3 n = (mesh.vertices[static_cast<std::size_t>(t[1])] - a).cross(mesh.vertices[static_cast<std::size_t>(t[2])] - a);
-    if (n.dot(a + mesh.vertices[static_cast<std::size_t>(t[1])] + mesh.vertices[static_cast<std::size_t>(t[2])]) < 0.0) {
-      std::swap(t[1], t[2]);
-    }
+    const sim::Vec3& b = mesh.vertices[static_cast<std::size_t>(t[1])];
+    const sim::Vec3& c = mesh.vertices[static_cast<std::size_t>(t[2])];
+    if ((b - a).cross(c - a).dot(a + b + c) < 0.0) std::swap(t[1], t[2]);
     mesh.triangles.push_back(t);
   }
   return mesh;

@@ -305,7 +305,7 @@ TEST_F(MeshIoTest, GltfNodesAreMergedWithTheirTransforms) {
   expect_same_vertex_set(expected, loaded.mesh.vertices, 0.0);
 }
 
-// ---- validation: one error per defect class --------------------------------------------------------------------------
+// ---- validation: one error per defect class ------------------------------------------------------------------------
 
 TEST_F(MeshIoTest, OpenMeshIsRejectedNamingAnEdgeAndTriangle) {
   sim::TriMesh mesh = octahedron();

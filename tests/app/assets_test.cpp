@@ -549,6 +549,67 @@ Mesh merged(const std::vector<const Mesh*>& parts) {
 
 // ---- tests ----------------------------------------------------------------------------------------------------------
 
+/// A closed tetrahedron (outward oriented) with corner `o` and edge length `e`, mm.
+Mesh tetrahedron(const Vec& o, double e) {
+  Mesh m;
+  m.v = {o, {o[0] + e, o[1], o[2]}, {o[0], o[1] + e, o[2]}, {o[0], o[1], o[2] + e}};
+  m.f = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  return m;
+}
+
+TEST(AssetsCheckers, DetectIntersectionsAndBrokenTopology) {
+  // The checkers used above must be able to fail: a valid solid passes, overlapping and touching ones do not.
+  const Mesh a = tetrahedron({0, 0, 0}, 4.0);
+  EXPECT_EQ(topology_problem(a), "");
+  EXPECT_GT(volume(a), 0.0);
+  EXPECT_TRUE(self_intersections(a, to_grid(a)).empty());
+  const Mesh far = tetrahedron({5, 0, 0}, 4.0), shifted = tetrahedron({1, 1, 1}, 4.0);
+  const Mesh corner = tetrahedron({4, 0, 0}, 4.0), small = tetrahedron({0.25, 0.25, 0.25}, 1.0);
+  const Mesh apart = merged({&a, &far});
+  EXPECT_TRUE(self_intersections(apart, to_grid(apart)).empty());
+  const Mesh overlapping = merged({&a, &shifted});
+  EXPECT_FALSE(self_intersections(overlapping, to_grid(overlapping)).empty());
+  const Mesh touching = merged({&a, &corner});  // corner on a's corner
+  EXPECT_FALSE(self_intersections(touching, to_grid(touching)).empty());
+  const Mesh nested = merged({&a, &small});  // inside, surfaces apart
+  EXPECT_TRUE(self_intersections(nested, to_grid(nested)).empty());
+
+  // A 4 mm cube is valid; with its corner (4, 4, 4) pushed through the bottom face it is not.
+  Mesh cube;
+  for (int i = 0; i < 8; ++i) cube.v.push_back({4.0 * (i & 1), 4.0 * ((i >> 1) & 1), 4.0 * ((i >> 2) & 1)});
+  cube.f = {{0, 2, 3}, {0, 3, 1}, {4, 5, 7}, {4, 7, 6}, {0, 1, 5}, {0, 5, 4},
+            {2, 6, 7}, {2, 7, 3}, {0, 4, 6}, {0, 6, 2}, {1, 3, 7}, {1, 7, 5}};
+  EXPECT_EQ(topology_problem(cube), "");
+  EXPECT_NEAR(volume(cube), 64.0, 1e-12);
+  EXPECT_TRUE(self_intersections(cube, to_grid(cube)).empty());
+  Mesh pierced = cube;
+  pierced.v[7] = {2.0, 2.0, -1.0};
+  EXPECT_FALSE(self_intersections(pierced, to_grid(pierced)).empty());
+
+  // Coplanar fold-over across a shared edge, and coplanar overlap at a shared vertex.
+  Mesh fold;
+  fold.v = {{0, 0, 0}, {4, 0, 0}, {0, 4, 0}, {1, 3, 0}, {3, -1, 0}};
+  fold.f = {{0, 1, 2}, {0, 1, 3}};
+  EXPECT_FALSE(self_intersections(fold, to_grid(fold)).empty());
+  fold.f = {{0, 1, 2}, {0, 4, 3}};
+  EXPECT_FALSE(self_intersections(fold, to_grid(fold)).empty());
+  fold.v[3] = {-1, -3, 0};  // now the shared-vertex pair meets only at vertex 0
+  fold.v[4] = {-3, -1, 0};
+  EXPECT_TRUE(self_intersections(fold, to_grid(fold)).empty());
+
+  // Topology: a missing triangle leaves a boundary, a flipped one repeats a directed edge, a collinear one is
+  // degenerate.
+  Mesh open = a;
+  open.f.pop_back();
+  EXPECT_NE(topology_problem(open), "");
+  Mesh flipped = a;
+  std::swap(flipped.f[0][1], flipped.f[0][2]);
+  EXPECT_NE(topology_problem(flipped), "");
+  Mesh flat = a;
+  flat.v[3] = {2.0, 2.0, 0.0};
+  EXPECT_NE(degenerate_triangle(flat, to_grid(flat)), -1);
+}
+
 TEST(Assets, RegenerationIsByteIdenticalToCommittedFiles) {
   const fs::path dir = fs::temp_directory_path() / ("octocut_assets_test_" + std::to_string(::getpid()));
   fs::remove_all(dir);

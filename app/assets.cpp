@@ -82,14 +82,14 @@ TriMesh loft(const std::vector<Ring>& rings, const Vec3& start_pole, const Vec3&
 
 // ---- meniscus ------------------------------------------------------------------------------------------------------
 
-constexpr double k_rim_a = 12.75;                   ///< inner rim ellipse semi-axis along x, mm
-constexpr double k_rim_b = 6.0;                     ///< inner rim ellipse semi-axis along y, mm
-constexpr double k_gap = 76.0 * k_pi / 180.0;       ///< angular opening of the C (in the ellipse angle), rad
-constexpr double k_psi_start = 0.5 * k_pi + 0.5 * k_gap;             ///< posterior horn end (x < 0, y > 0)
-constexpr double k_psi_end = 2.5 * k_pi - 0.5 * k_gap;               ///< anterior horn end (x > 0, y > 0)
-constexpr double k_inner_thickness = 1.2;           ///< control thickness of the inner free edge, mm
-constexpr double k_top_exponent = 1.5;              ///< top height grows like (u / W)^p: a concave (bowl) top
-constexpr double k_horn_fraction = 0.15;            ///< spine fraction over which each horn tapers
+constexpr double k_rim_a = 12.75;                         ///< inner rim ellipse semi-axis along x, mm
+constexpr double k_rim_b = 6.0;                           ///< inner rim ellipse semi-axis along y, mm
+constexpr double k_gap = 76.0 * k_pi / 180.0;             ///< angular opening of the C (in the ellipse angle), rad
+constexpr double k_psi_start = 0.5 * k_pi + 0.5 * k_gap;  ///< posterior horn end (x < 0, y > 0)
+constexpr double k_psi_end = 2.5 * k_pi - 0.5 * k_gap;    ///< anterior horn end (x > 0, y > 0)
+constexpr double k_inner_thickness = 1.2;                 ///< control thickness of the inner free edge, mm
+constexpr double k_top_exponent = 1.5;                    ///< top height grows like (u / W)^p: a concave (bowl) top
+constexpr double k_horn_fraction = 0.15;                  ///< spine fraction over which each horn tapers
 
 /// Point of the inner rim ellipse, mm.
 Vec3 rim_point(double psi) { return {k_rim_a * std::cos(psi), k_rim_b * std::sin(psi), 0.0}; }
@@ -200,7 +200,8 @@ class SpineParam {
       const double psi = k_psi_start + (k_psi_end - k_psi_start) * k / k_steps;
       const Vec3 p = mid_point(psi);
       m_psi[static_cast<std::size_t>(k)] = psi;
-      m_length[static_cast<std::size_t>(k)] = k == 0 ? 0.0 : m_length[static_cast<std::size_t>(k - 1)] + (p - prev).norm();
+      m_length[static_cast<std::size_t>(k)] =
+          k == 0 ? 0.0 : m_length[static_cast<std::size_t>(k - 1)] + (p - prev).norm();
       prev = p;
     }
   }
@@ -247,7 +248,8 @@ std::pair<std::vector<Ring>, Vec3> horn_cap(const Vec3& rim, const Vec3& normal,
     const Vec3 origin = rim + cap_length * std::sin(theta) * dir;
     Ring ring;
     ring.reserve(profile.size());
-    for (const auto& q : profile) ring.push_back(origin + (u_c + sigma * (q[0] - u_c)) * normal + Vec3(0, 0, sigma * q[1]));
+    for (const auto& q : profile)
+      ring.push_back(origin + (u_c + sigma * (q[0] - u_c)) * normal + Vec3(0, 0, sigma * q[1]));
     rings.push_back(std::move(ring));
   }
   return {rings, rim + cap_length * dir + u_c * normal};
@@ -315,7 +317,8 @@ sim::TriMesh make_meniscus(int target_vertices) {
   const double h = std::sqrt(spine.length() * mid_perimeter / target_vertices);
   const int m = std::max(16, 4 * static_cast<int>(std::lround(mid_perimeter / h / 4.0)));
   const int cap_rings = std::max(6, m / 8);
-  const int main_rings = static_cast<int>(std::lround(static_cast<double>(target_vertices - 2) / m)) - 2 * (cap_rings - 1);
+  const int main_rings =
+      static_cast<int>(std::lround(static_cast<double>(target_vertices - 2) / m)) - 2 * (cap_rings - 1);
   if (main_rings < 8) throw std::invalid_argument("make_meniscus: target_vertices too small for the profile");
 
   // Main rings: the wedge profile placed in the normal plane of the rim at each spine station.
@@ -339,10 +342,10 @@ sim::TriMesh make_meniscus(int target_vertices) {
 
   // Rounded caps at the posterior (s = 0) and anterior (s = 1) horns, continuing along the end tangents.
   const double psi0 = spine.psi(0.0), psi1 = spine.psi(1.0);
-  const auto [cap0, pole0] = horn_cap(rim_point(psi0), rim_normal(psi0), -rim_tangent(psi0),
-                                      wedge_size(0.0, psi0)[0], first_profile, cap_rings);
-  const auto [cap1, pole1] = horn_cap(rim_point(psi1), rim_normal(psi1), rim_tangent(psi1),
-                                      wedge_size(1.0, psi1)[0], last_profile, cap_rings);
+  const auto [cap0, pole0] = horn_cap(rim_point(psi0), rim_normal(psi0), -rim_tangent(psi0), wedge_size(0.0, psi0)[0],
+                                      first_profile, cap_rings);
+  const auto [cap1, pole1] =
+      horn_cap(rim_point(psi1), rim_normal(psi1), rim_tangent(psi1), wedge_size(1.0, psi1)[0], last_profile, cap_rings);
   std::vector<Ring> rings(cap0.rbegin(), cap0.rend());
   rings.insert(rings.end(), body.begin(), body.end());
   rings.insert(rings.end(), cap1.begin(), cap1.end());
@@ -390,16 +393,16 @@ sim::TriMesh make_star_prism(int points, double outer_radius_mm, double inner_ra
 }
 
 sim::TriMesh make_punch() {
-  constexpr int k_segments = 32;   // points around each ring
-  constexpr int k_nose_rings = 6;  // rings of each rounded end
-  constexpr double k_radius = 1.75;        // shaft radius, mm
-  constexpr double k_jaw_radius = 1.6;     // jaw half-ellipse height, mm
-  constexpr double k_half_gap = 0.15;      // half the gap between the closed jaws, mm
-  constexpr double k_nose = 1.5;           // length of the rounded jaw nose, mm
-  constexpr double k_jaw_end = 10.5;       // the lower jaw turns into the shaft from here, mm
-  constexpr double k_shaft_start = 12.5;   // full round shaft from here, mm
-  constexpr double k_shaft_end = 150.0;    // proximal end of the shaft, mm
-  constexpr double k_hinge = 9.5;          // proximal end of the upper jaw and its hinge, mm
+  constexpr int k_segments = 32;                  // points around each ring
+  constexpr int k_nose_rings = 6;                 // rings of each rounded end
+  constexpr double k_radius = 1.75;               // shaft radius, mm
+  constexpr double k_jaw_radius = 1.6;            // jaw half-ellipse height, mm
+  constexpr double k_half_gap = 0.15;             // half the gap between the closed jaws, mm
+  constexpr double k_nose = 1.5;                  // length of the rounded jaw nose, mm
+  constexpr double k_jaw_end = 10.5;              // the lower jaw turns into the shaft from here, mm
+  constexpr double k_shaft_start = 12.5;          // full round shaft from here, mm
+  constexpr double k_shaft_end = 150.0;           // proximal end of the shaft, mm
+  constexpr double k_hinge = 9.5;                 // proximal end of the upper jaw and its hinge, mm
   constexpr double k_open = 14.0 * k_pi / 180.0;  // opening angle of the upper jaw, rad
 
   // Cross-section ring at x: a half ellipse of height `low` under z_c and one of height `up` above, width 2·r_y,
@@ -426,7 +429,8 @@ sim::TriMesh make_punch() {
   for (int k = 1; k <= 8; ++k) {
     const double x = k_jaw_end + (k_shaft_start - k_jaw_end) * k / 8.0;
     const double b = smoothstep(static_cast<double>(k) / 8.0);
-    lower.push_back(section(x, -k_half_gap * (1.0 - b), k_jaw_radius + (k_radius - k_jaw_radius) * b, k_radius * b, 1.0));
+    lower.push_back(
+        section(x, -k_half_gap * (1.0 - b), k_jaw_radius + (k_radius - k_jaw_radius) * b, k_radius * b, 1.0));
   }
   for (const double x : {15.0, 20.0, 30.0, 45.0, 60.0, 75.0, 90.0, 105.0, 120.0, 135.0, k_shaft_end}) {
     lower.push_back(section(x, 0.0, k_radius, k_radius, 1.0));
@@ -445,7 +449,8 @@ sim::TriMesh make_punch() {
   }
   for (int k = 0; k < k_nose_rings; ++k) {
     const double theta = 0.5 * k_pi * k / k_nose_rings;
-    upper.push_back(section(k_hinge - k_heel + k_heel * std::sin(theta), k_half_gap, 0.0, k_jaw_radius, std::cos(theta)));
+    upper.push_back(
+        section(k_hinge - k_heel + k_heel * std::sin(theta), k_half_gap, 0.0, k_jaw_radius, std::cos(theta)));
   }
   TriMesh jaw = loft(upper, Vec3(0, 0, k_half_gap), Vec3(k_hinge, 0, k_half_gap));
 
@@ -469,8 +474,8 @@ sim::TriMesh make_femoral_condyle(const sim::TriMesh& meniscus) {
     for (const Vec3& p : meniscus.vertices) {
       const double dz = p.z() - z0;
       const double c = (dz < 0.0 ? k_c_low : k_c_up) + k_clearance;
-      const double f = std::pow((p.x() - cx) / (k_a + k_clearance), 2) + std::pow((p.y() - cy) / (k_b + k_clearance), 2) +
-                       std::pow(dz / c, 2);
+      const double f = std::pow((p.x() - cx) / (k_a + k_clearance), 2) +
+                       std::pow((p.y() - cy) / (k_b + k_clearance), 2) + std::pow(dz / c, 2);
       if (f < 1.0) return false;
     }
     return true;

@@ -34,8 +34,9 @@ constexpr double k_pi = std::numbers::pi;
 constexpr double k_grid = 65536.0;  ///< the assets' coordinate grid: 2^-16 mm
 
 /// The files `octocut assets` writes.
-const std::vector<std::string> k_files = {"meniscus_10k.ply", "meniscus_50k.ply", "punch.ply",         "blade_cyl2mm.ply",
-                                          "blade_star.ply",   "blade_cyl20mm.ply", "femur_condyle.ply", "tibia_plateau.ply"};
+const std::vector<std::string> k_files = {"meniscus_10k.ply",  "meniscus_50k.ply", "punch.ply",
+                                          "blade_cyl2mm.ply",  "blade_star.ply",   "blade_cyl20mm.ply",
+                                          "femur_condyle.ply", "tibia_plateau.ply"};
 
 /// A mesh as read from a PLY file, mm.
 struct Mesh {
@@ -136,18 +137,21 @@ std::string topology_problem(const Mesh& m) {
   for (std::size_t i = 0; i < m.f.size(); ++i) {
     const Tri& t = m.f[i];
     for (int k = 0; k < 3; ++k) {
-      if (t[k] < 0 || static_cast<std::size_t>(t[k]) >= m.v.size()) return "triangle " + std::to_string(i) + ": index out of range";
+      if (t[k] < 0 || static_cast<std::size_t>(t[k]) >= m.v.size())
+        return "triangle " + std::to_string(i) + ": index out of range";
       used[static_cast<std::size_t>(t[k])] = 1;
     }
     if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) return "triangle " + std::to_string(i) + ": repeated vertex";
     for (int k = 0; k < 3; ++k) {
       const uint64_t key = (static_cast<uint64_t>(t[k]) << 32) | static_cast<uint32_t>(t[(k + 1) % 3]);
-      if (++directed[key] > 1) return "triangle " + std::to_string(i) + ": directed edge used twice (not manifold or flipped)";
+      if (++directed[key] > 1)
+        return "triangle " + std::to_string(i) + ": directed edge used twice (not manifold or flipped)";
     }
   }
   for (const auto& [key, count] : directed) {
     const uint64_t reverse = (key << 32) | (key >> 32);
-    if (directed.find(reverse) == directed.end()) return "boundary edge " + std::to_string(key >> 32) + "-" + std::to_string(key & 0xffffffffu);
+    if (directed.find(reverse) == directed.end())
+      return "boundary edge " + std::to_string(key >> 32) + "-" + std::to_string(key & 0xffffffffu);
   }
   for (std::size_t i = 0; i < used.size(); ++i) {
     if (!used[i]) return "vertex " + std::to_string(i) + " unused";
@@ -166,7 +170,8 @@ std::vector<IVec> to_grid(const Mesh& m) {
     IVec q{};
     for (int k = 0; k < 3; ++k) {
       const double s = m.v[i][static_cast<std::size_t>(k)] * k_grid;
-      EXPECT_TRUE(s == std::floor(s) && std::abs(m.v[i][static_cast<std::size_t>(k)]) < 256.0) << "vertex " << i << " off the grid";
+      EXPECT_TRUE(s == std::floor(s) && std::abs(m.v[i][static_cast<std::size_t>(k)]) < 256.0)
+          << "vertex " << i << " off the grid";
       q[static_cast<std::size_t>(k)] = static_cast<int64_t>(s);
     }
     out.push_back(q);
@@ -179,7 +184,8 @@ int sign(i128 x) { return (x > 0) - (x < 0); }
 IVec sub(const IVec& a, const IVec& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
 
 std::array<i128, 3> cross(const IVec& u, const IVec& v) {
-  return {i128(u[1]) * v[2] - i128(u[2]) * v[1], i128(u[2]) * v[0] - i128(u[0]) * v[2], i128(u[0]) * v[1] - i128(u[1]) * v[0]};
+  return {i128(u[1]) * v[2] - i128(u[2]) * v[1], i128(u[2]) * v[0] - i128(u[0]) * v[2],
+          i128(u[0]) * v[1] - i128(u[1]) * v[0]};
 }
 
 /// Sign of the volume of (a, b, c, d): positive when d is above the plane of the counter-clockwise triangle abc.
@@ -297,7 +303,8 @@ bool triangles_intersect(const std::vector<IVec>& g, const Tri& t1, const Tri& t
   for (const auto& [s, o] : {std::pair<Tri, Tri>{a, b}, std::pair<Tri, Tri>{b, a}}) {
     const int axis = drop_axis(P(o[0]), P(o[1]), P(o[2]));
     for (int k = 1; k <= 2; ++k) {
-      if (orient3d(P(o[0]), P(o[1]), P(o[2]), P(s[k])) == 0 && in_cone_2d(P(v), P(o[1]), P(o[2]), P(s[k]), axis)) return true;
+      if (orient3d(P(o[0]), P(o[1]), P(o[2]), P(s[k])) == 0 && in_cone_2d(P(v), P(o[1]), P(o[2]), P(s[k]), axis))
+        return true;
     }
   }
   return false;
@@ -337,13 +344,18 @@ std::vector<std::pair<int, int>> self_intersections(const Mesh& m, const std::ve
     if (dims[0] * dims[1] * dims[2] <= 4'000'000) break;
     cell *= 1.5;
   }
-  const auto cell_of = [&](int64_t x, int k) { return std::min<int64_t>(dims[k] - 1, static_cast<int64_t>((x - bmin[k]) / cell)); };
+  const auto cell_of = [&](int64_t x, int k) {
+    return std::min<int64_t>(dims[k] - 1, static_cast<int64_t>((x - bmin[k]) / cell));
+  };
   std::vector<std::vector<int>> cells(static_cast<std::size_t>(dims[0] * dims[1] * dims[2]));
-  const auto id = [&](int64_t i, int64_t j, int64_t k) { return static_cast<std::size_t>((i * dims[1] + j) * dims[2] + k); };
+  const auto id = [&](int64_t i, int64_t j, int64_t k) {
+    return static_cast<std::size_t>((i * dims[1] + j) * dims[2] + k);
+  };
   for (std::size_t t = 0; t < nf; ++t) {
     for (int64_t i = cell_of(lo[t][0], 0); i <= cell_of(hi[t][0], 0); ++i) {
       for (int64_t j = cell_of(lo[t][1], 1); j <= cell_of(hi[t][1], 1); ++j) {
-        for (int64_t k = cell_of(lo[t][2], 2); k <= cell_of(hi[t][2], 2); ++k) cells[id(i, j, k)].push_back(static_cast<int>(t));
+        for (int64_t k = cell_of(lo[t][2], 2); k <= cell_of(hi[t][2], 2); ++k)
+          cells[id(i, j, k)].push_back(static_cast<int>(t));
       }
     }
   }
@@ -361,7 +373,8 @@ std::vector<std::pair<int, int>> self_intersections(const Mesh& m, const std::ve
               overlap = overlap && lo[s][c] <= hi[t][c] && lo[t][c] <= hi[s][c];
               corner[c] = std::max(lo[s][c], lo[t][c]);
             }
-            if (!overlap || cell_of(corner[0], 0) != i || cell_of(corner[1], 1) != j || cell_of(corner[2], 2) != k) continue;
+            if (!overlap || cell_of(corner[0], 0) != i || cell_of(corner[1], 1) != j || cell_of(corner[2], 2) != k)
+              continue;
             if (triangles_intersect(g, m.f[s], m.f[t])) {
               hits.emplace_back(s, t);
               if (hits.size() >= limit) return hits;
@@ -369,6 +382,29 @@ std::vector<std::pair<int, int>> self_intersections(const Mesh& m, const std::ve
           }
         }
       }
+    }
+  }
+  return hits;
+}
+
+/// Pairs of intersecting triangles found by testing every pair whose bounding boxes overlap (no grid).
+std::vector<std::pair<int, int>> brute_force_intersections(const Mesh& m, const std::vector<IVec>& g) {
+  std::vector<std::pair<int, int>> hits;
+  std::vector<std::array<IVec, 2>> boxes;
+  for (const Tri& t : m.f) {
+    std::array<IVec, 2> b{g[t[0]], g[t[0]]};
+    for (int k = 1; k < 3; ++k) {
+      for (int c = 0; c < 3; ++c) b[0][c] = std::min(b[0][c], g[t[k]][c]), b[1][c] = std::max(b[1][c], g[t[k]][c]);
+    }
+    boxes.push_back(b);
+  }
+  for (std::size_t s = 0; s < m.f.size(); ++s) {
+    for (std::size_t t = s + 1; t < m.f.size(); ++t) {
+      bool overlap = true;
+      for (int c = 0; c < 3; ++c)
+        overlap = overlap && boxes[s][0][c] <= boxes[t][1][c] && boxes[t][0][c] <= boxes[s][1][c];
+      if (overlap && triangles_intersect(g, m.f[s], m.f[t]))
+        hits.emplace_back(static_cast<int>(s), static_cast<int>(t));
     }
   }
   return hits;
@@ -416,7 +452,8 @@ class VerticalRays {
         y0 = std::min(y0, m.v[m.f[t][k]][1]), y1 = std::max(y1, m.v[m.f[t][k]][1]);
       }
       for (int i = bin(x0, 0); i <= bin(x1, 0); ++i) {
-        for (int j = bin(y0, 1); j <= bin(y1, 1); ++j) m_bins[static_cast<std::size_t>(i * m_ny + j)].push_back(static_cast<int>(t));
+        for (int j = bin(y0, 1); j <= bin(y1, 1); ++j)
+          m_bins[static_cast<std::size_t>(i * m_ny + j)].push_back(static_cast<int>(t));
       }
     }
   }
@@ -455,11 +492,11 @@ class VerticalRays {
 
 /// The wedge measured along one horizontal ray from `centre` at angle `theta`.
 struct RadialProfile {
-  double r_inner = 0.0;      ///< where the footprint starts, mm
-  double r_outer = 0.0;      ///< where it ends, mm
-  double r_peak = 0.0;       ///< where the thickness is largest, mm
-  double peak = 0.0;         ///< largest thickness, mm
-  std::vector<double> t;     ///< thickness every 0.05 mm from the centre, mm
+  double r_inner = 0.0;   ///< where the footprint starts, mm
+  double r_outer = 0.0;   ///< where it ends, mm
+  double r_peak = 0.0;    ///< where the thickness is largest, mm
+  double peak = 0.0;      ///< largest thickness, mm
+  std::vector<double> t;  ///< thickness every 0.05 mm from the centre, mm
 };
 
 RadialProfile radial_profile(const VerticalRays& rays, double cx, double cy, double theta) {
@@ -517,7 +554,8 @@ double min_vertex_distance(const Mesh& from, const Mesh& to) {
   for (const Tri& t : to.f) {
     std::array<Vec, 2> b{to.v[t[0]], to.v[t[0]]};
     for (int k = 1; k < 3; ++k) {
-      for (int c = 0; c < 3; ++c) b[0][c] = std::min(b[0][c], to.v[t[k]][c]), b[1][c] = std::max(b[1][c], to.v[t[k]][c]);
+      for (int c = 0; c < 3; ++c)
+        b[0][c] = std::min(b[0][c], to.v[t[k]][c]), b[1][c] = std::max(b[1][c], to.v[t[k]][c]);
     }
     boxes.push_back(b);
   }
@@ -585,6 +623,7 @@ TEST(AssetsCheckers, DetectIntersectionsAndBrokenTopology) {
   Mesh pierced = cube;
   pierced.v[7] = {2.0, 2.0, -1.0};
   EXPECT_FALSE(self_intersections(pierced, to_grid(pierced)).empty());
+  EXPECT_EQ(self_intersections(pierced, to_grid(pierced), 1000), brute_force_intersections(pierced, to_grid(pierced)));
 
   // Coplanar fold-over across a shared edge, and coplanar overlap at a shared vertex.
   Mesh fold;
@@ -642,6 +681,15 @@ TEST(Assets, EveryMeshIsAClosedOrientedManifoldWithoutSelfIntersections) {
   for (const std::string& name : k_files) expect_valid_solid(name);
 }
 
+TEST(Assets, SmallMeshesAlsoPassABruteForceIntersectionTest) {
+  // Every pair of triangles (boxes overlapping), without the grid.
+  for (const char* name : {"punch.ply", "blade_cyl2mm.ply", "blade_star.ply", "blade_cyl20mm.ply", "femur_condyle.ply",
+                           "tibia_plateau.ply"}) {
+    const Mesh& m = committed(name);
+    EXPECT_TRUE(brute_force_intersections(m, to_grid(m)).empty()) << name;
+  }
+}
+
 TEST(Assets, MeniscusVertexCounts) {
   EXPECT_NEAR(static_cast<double>(committed("meniscus_10k.ply").v.size()), 10000.0, 1000.0);
   EXPECT_NEAR(static_cast<double>(committed("meniscus_50k.ply").v.size()), 50000.0, 5000.0);
@@ -687,10 +735,11 @@ void expect_meniscus_shape(const std::string& name) {
     const RadialProfile p = radial_profile(rays, cx, cy, deg * k_pi / 180.0);
     ASSERT_GT(p.peak, 0.0);
     width[deg] = p.r_outer - p.r_inner;
-    std::printf("  ray %3d deg: width %5.2f mm, peak %4.2f mm at %4.1f mm from the inner edge, thickness %4.2f / %4.2f mm "
-                "at 0.5 / 1 mm from the inner edge\n",
-                deg, width[deg], p.peak, p.r_peak - p.r_inner, thickness_at(p, p.r_inner + 0.5),
-                thickness_at(p, p.r_inner + 1.0));
+    std::printf(
+        "  ray %3d deg: width %5.2f mm, peak %4.2f mm at %4.1f mm from the inner edge, thickness %4.2f / %4.2f mm "
+        "at 0.5 / 1 mm from the inner edge\n",
+        deg, width[deg], p.peak, p.r_peak - p.r_inner, thickness_at(p, p.r_inner + 0.5),
+        thickness_at(p, p.r_inner + 1.0));
     if (deg < 165 || deg > 375) continue;  // the horns taper; the body checks below apply between them
     // About 10 mm wide; 6-8 mm tall near the periphery.
     EXPECT_GT(p.r_outer - p.r_inner, 7.0);
@@ -790,9 +839,13 @@ TEST(Assets, KneeContextFramesTheMeniscusWithAGap) {
     EXPECT_GT(tb[1][0], mb[1][0]);
     // At least 1 mm between the surfaces, both ways, and no intersection anywhere in the union.
     if (meniscus.v.size() < 20000) {
-      EXPECT_GE(min_vertex_distance(meniscus, femur), 1.0);
-      EXPECT_GE(min_vertex_distance(femur, meniscus), 1.0);
-      EXPECT_GE(min_vertex_distance(meniscus, tibia), 1.0);
+      const double mf = min_vertex_distance(meniscus, femur), fm = min_vertex_distance(femur, meniscus);
+      const double mt = min_vertex_distance(meniscus, tibia), tm = min_vertex_distance(tibia, meniscus);
+      std::printf("gaps: meniscus-condyle %.2f / %.2f mm, meniscus-plateau %.2f / %.2f mm\n", mf, fm, mt, tm);
+      EXPECT_GE(mf, 1.0);
+      EXPECT_GE(fm, 1.0);
+      EXPECT_GE(mt, 1.0);
+      EXPECT_GE(tm, 1.0);
     }
     const Mesh all = merged({&meniscus, &femur, &tibia});
     EXPECT_TRUE(self_intersections(all, to_grid(all), 1).empty());

@@ -234,13 +234,24 @@ std::array<double, 2> wedge_size(double s, double psi) {
   return {body_width(psi) * (0.55 + 0.45 * blend), body_height(psi) * (0.6 + 0.4 * blend)};
 }
 
-/// Rings of a rounded cap beyond a horn end: the end profile shrinks towards its bottom-centre point (u_c, 0) while
-/// advancing along `dir`, like a quarter ellipsoid of length L = W / 2. Returns the rings (nearest the body first)
-/// and the pole.
+/// Rings of a rounded cap beyond a horn end: the end profile shrinks towards its area centroid (u_c, z_c) while
+/// advancing along `dir`, like a half ellipsoid of length L = W / 2, and closes in a pole at the centroid. Returns
+/// the rings (nearest the body first) and the pole.
 std::pair<std::vector<Ring>, Vec3> horn_cap(const Vec3& rim, const Vec3& normal, const Vec3& dir, double width,
                                             const std::vector<std::array<double, 2>>& profile, int cap_rings) {
-  const double u_c = 0.5 * width;
+  // Area centroid of the profile polygon (shoelace).
+  double area2 = 0.0, cu = 0.0, cz = 0.0;
+  for (std::size_t k = 0; k < profile.size(); ++k) {
+    const auto& a = profile[k];
+    const auto& b = profile[(k + 1) % profile.size()];
+    const double w = a[0] * b[1] - b[0] * a[1];
+    area2 += w;
+    cu += (a[0] + b[0]) * w;
+    cz += (a[1] + b[1]) * w;
+  }
+  const double u_c = cu / (3.0 * area2), z_c = cz / (3.0 * area2);
   const double cap_length = 0.5 * width;
+  // Rings at equal angles of the quarter ellipse (scale cos θ, advance L sin θ).
   std::vector<Ring> rings;
   for (int k = 1; k < cap_rings; ++k) {
     const double theta = 0.5 * k_pi * k / cap_rings;
@@ -248,11 +259,12 @@ std::pair<std::vector<Ring>, Vec3> horn_cap(const Vec3& rim, const Vec3& normal,
     const Vec3 origin = rim + cap_length * std::sin(theta) * dir;
     Ring ring;
     ring.reserve(profile.size());
-    for (const auto& q : profile)
-      ring.push_back(origin + (u_c + sigma * (q[0] - u_c)) * normal + Vec3(0, 0, sigma * q[1]));
+    for (const auto& q : profile) {
+      ring.push_back(origin + (u_c + sigma * (q[0] - u_c)) * normal + Vec3(0, 0, z_c + sigma * (q[1] - z_c)));
+    }
     rings.push_back(std::move(ring));
   }
-  return {rings, rim + cap_length * dir + u_c * normal};
+  return {rings, rim + cap_length * dir + u_c * normal + Vec3(0, 0, z_c)};
 }
 
 // ---- star-shaped bodies (cube sphere) ------------------------------------------------------------------------------

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "assets.hpp"
 #include "octocut/engine/bench.hpp"
 #include "octocut/engine/io.hpp"
 #include "octocut/engine/scene_loader.hpp"
@@ -40,6 +41,17 @@ int cmd_validate(const std::string& scene_path, const std::vector<std::string>& 
               scene_path.c_str(), m.num_elements(), m.num_dofs(), m.dofs().hanging_slots, o.surface.num_vertices(),
               o.surface.num_triangles(), o.graph ? o.graph->num_tets() : 0);
   for (const std::string& w : o.warnings) std::printf("warning: %s\n", w.c_str());
+  return 0;
+}
+
+int cmd_assets(const std::string& dir) {
+  // Regenerate every procedural mesh and list what was written.
+  const std::vector<app::AssetInfo> infos = app::write_assets(dir);
+  std::printf("%-20s %9s %9s %14s\n", "file", "vertices", "triangles", "volume_mm3");
+  for (const app::AssetInfo& a : infos) {
+    std::printf("%-20s %9zu %9zu %14.3f\n", a.file.c_str(), a.vertices, a.triangles, a.volume_mm3);
+  }
+  std::printf("wrote %zu meshes (mm) to %s\n", infos.size(), dir.c_str());
   return 0;
 }
 
@@ -79,6 +91,10 @@ int main(int argc, char** argv) {
 
   auto* scene_doc = app.add_subcommand("scene-doc", "Print the scene-format documentation generated from the schema");
 
+  auto* assets = app.add_subcommand("assets", "Regenerate the procedural meshes (binary PLY, millimetres)");
+  std::string assets_dir = std::string(OCTOCUT_SOURCE_DIR) + "/assets/meshes";
+  assets->add_option("--out", assets_dir, "Output directory")->capture_default_str();
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -94,6 +110,7 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (*bench) return cmd_bench(names, json_path, quiet);
+    if (*assets) return cmd_assets(assets_dir);
     if (*scene_doc) {
       std::cout << engine::scene_format_markdown();
       return 0;

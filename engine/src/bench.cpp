@@ -9,6 +9,7 @@
 #include <stdexcept>
 #include <thread>
 
+#include "octocut/engine/embedding_bench.hpp"
 #include "octocut/sim/simulator.hpp"
 #include "report.hpp"
 
@@ -130,6 +131,31 @@ std::vector<BenchOutput> bench_step(const std::string& variant) {
   return {b};
 }
 
+// Paper Fig. 6: correspondence update after a 100-vertex cut, Z-curve list against per-level lists, at one depth.
+std::vector<BenchOutput> bench_embedding(int depth) {
+  EmbeddingBenchOptions o;
+  o.min_depth = o.max_depth = depth;
+  const sim::TriMesh mesh = meniscus_proxy_mesh();
+  const EmbeddingBenchResult r = run_embedding_bench(mesh, *meniscus_proxy_material(), o).front();
+  BenchOutput b;
+  b.name = "embedding/depth" + std::to_string(depth);
+  b.runs = long(r.zcurve_ms.size());
+  b.ms = TimingSummary::of(r.zcurve_ms);
+  b.params = {{"mesh", "procedural ellipsoid 45x27x8 mm (meniscus stand-in)"},
+              {"depth", depth},
+              {"leaves", r.leaves},
+              {"naive_nodes", r.naive_nodes},
+              {"removed", r.removed},
+              {"ball_radius_m", o.ball_radius},
+              {"inserted_fallback", r.fallback}};
+  b.metrics = {{"zcurve_ms", median_of(r.zcurve_ms)},
+               {"naive_ms", median_of(r.naive_ms)},
+               {"zcurve_bind_ms", median_of(r.zcurve_bind_ms)},
+               {"vertices", r.vertices},
+               {"inserted", r.inserted}};
+  return {b};
+}
+
 struct Entry {
   std::string name;
   std::function<std::vector<BenchOutput>()> run;
@@ -138,7 +164,13 @@ struct Entry {
 std::vector<Entry> registry() {
   return {{"step/cube10", [] { return bench_step("cube10"); }},
           {"step/cube10-jacobi", [] { return bench_step("cube10-jacobi"); }},
-          {"step/cube10-cholmod", [] { return bench_step("cube10-cholmod"); }}};
+          {"step/cube10-cholmod", [] { return bench_step("cube10-cholmod"); }},
+          {"embedding/depth3", [] { return bench_embedding(3); }},
+          {"embedding/depth4", [] { return bench_embedding(4); }},
+          {"embedding/depth5", [] { return bench_embedding(5); }},
+          {"embedding/depth6", [] { return bench_embedding(6); }},
+          {"embedding/depth7", [] { return bench_embedding(7); }},
+          {"embedding/depth8", [] { return bench_embedding(8); }}};
 }
 
 std::string cpu_name() {

@@ -137,8 +137,25 @@ std::vector<int> ZCurveList::update(std::span<const int> removed, std::span<cons
   const bool one_by_one = denom <= 0.0 || double(n_new) < double(n) / denom;
   m_merged = !one_by_one;
   if (one_by_one) {
-    m_entries.reserve(n + n_new);
-    for (const ZEntry& e : added) m_entries.insert(std::upper_bound(m_entries.begin(), m_entries.end(), e), e);
+    // Each new entry finds its place by binary search (O(log n) each, on the part of the list not yet passed); the
+    // list then opens all gaps in one backward pass, so no element moves more than once.
+    std::sort(added.begin(), added.end());
+    std::vector<std::size_t> at(n_new);
+    std::size_t from = 0;
+    for (std::size_t i = 0; i < n_new; ++i) {
+      from = std::size_t(std::upper_bound(m_entries.begin() + std::ptrdiff_t(from), m_entries.end(), added[i]) -
+                         m_entries.begin());
+      at[i] = from;
+    }
+    m_entries.resize(n + n_new);
+    std::size_t end = n;
+    for (std::size_t i = n_new; i-- > 0;) {
+      // Shift the block [at[i], end) up by i + 1 places, then drop the new entry in front of it.
+      std::move_backward(m_entries.begin() + std::ptrdiff_t(at[i]), m_entries.begin() + std::ptrdiff_t(end),
+                         m_entries.begin() + std::ptrdiff_t(end + i + 1));
+      m_entries[at[i] + i] = added[i];
+      end = at[i];
+    }
   } else {
     std::sort(added.begin(), added.end());
     std::vector<ZEntry> merged(n + n_new);

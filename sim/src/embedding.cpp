@@ -331,20 +331,31 @@ void SurfaceEmbedding::deformed_positions(const std::vector<Vec3>& x_dofs, std::
 
 void SurfaceEmbedding::deformed_normals(const std::vector<Vec3>& positions, std::vector<Vec3>& normals,
                                         Executor& exec) const {
+  std::vector<Vec3> face_normals;
+  deformed_normals(positions, normals, exec, face_normals);
+}
+
+void SurfaceEmbedding::deformed_normals(const std::vector<Vec3>& positions, std::vector<Vec3>& normals,
+                                        Executor& exec, std::vector<Vec3>& face_normals) const {
   if (positions.size() != m_rest.size())
     throw std::invalid_argument("SurfaceEmbedding::deformed_normals: " + std::to_string(positions.size()) +
                                 " positions for " + std::to_string(m_rest.size()) + " vertices");
+  // Face normals (twice the area times the unit normal), one task per triangle range.
+  face_normals.resize(m_triangles.size());
+  exec.parallel_for(int(m_triangles.size()), 4096, [&](int begin, int end) {
+    for (int t = begin; t < end; ++t) {
+      const auto& tri = m_triangles[std::size_t(t)];
+      const Vec3& a = positions[std::size_t(tri[0])];
+      face_normals[std::size_t(t)] = (positions[std::size_t(tri[1])] - a).cross(positions[std::size_t(tri[2])] - a);
+    }
+  });
+  // Each vertex sums its incident faces in triangle order, as sim::vertex_normals does, and normalises.
   normals.resize(m_rest.size());
   exec.parallel_for(num_vertices(), 2048, [&](int begin, int end) {
     for (int v = begin; v < end; ++v) {
-      // Sum the incident face normals (twice the area times the unit normal) in triangle order, then normalise.
       Vec3 n = Vec3::Zero();
-      for (int i = m_tri_begin[std::size_t(v)]; i < m_tri_begin[std::size_t(v) + 1]; ++i) {
-        const auto& t = m_triangles[std::size_t(m_tri[std::size_t(i)])];
-        const Vec3& a = positions[std::size_t(t[0])];
-        const Vec3 f = (positions[std::size_t(t[1])] - a).cross(positions[std::size_t(t[2])] - a);
-        n += f;
-      }
+      for (int i = m_tri_begin[std::size_t(v)]; i < m_tri_begin[std::size_t(v) + 1]; ++i)
+        n += face_normals[std::size_t(m_tri[std::size_t(i)])];
       const double len = n.norm();
       normals[std::size_t(v)] = len > 0.0 ? Vec3(n / len) : Vec3::Zero();
     }

@@ -115,6 +115,9 @@ class SurfaceEmbedding {
   /// Area-weighted unit vertex normals (|V|) of the mesh at `positions` (|V|, m), parallel over vertices; equal bit
   /// for bit to sim::vertex_normals(positions, triangles()).
   void deformed_normals(const std::vector<Vec3>& positions, std::vector<Vec3>& normals, Executor& exec) const;
+  /// The same with a caller-owned scratch array for the face normals (|F|, m^2), which saves its allocation per step.
+  void deformed_normals(const std::vector<Vec3>& positions, std::vector<Vec3>& normals, Executor& exec,
+                        std::vector<Vec3>& face_normals) const;
 
   /// Applies a cut: removes and inserts vertices (ZCurveList::update), replaces the triangles, re-embeds only the
   /// new vertices, the vertices of leaves that are new in `new_model` or listed in edit.changed_leaves, the vertices

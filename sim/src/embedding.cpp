@@ -72,6 +72,105 @@ std::vector<int> match_leaves(const Octree& old_tree, const Octree& tree, std::v
   return old_to_new;
 }
 
+// Nearest-leaf search for fallback vertices: a uniform grid of G^3 buckets over the root, each listing the leaves
+// whose box overlaps it, searched ring by ring around the point. Gives exactly the brute-force answer of
+// embed_vertex (same distance function, same tie-break) at a cost independent of the number of leaves far away.
+class NearestLeafGrid {
+ public:
+  NearestLeafGrid(const Octree& tree, const RootGeometry& root) : m_tree(tree), m_root(root) {
+    // About two leaves per bucket, at most 128^3 buckets; G is a power of two so buckets align with cells.
+    m_log_g = 0;
+    while (m_log_g < 7 && (std::size_t(1) << (3 * (m_log_g + 1))) <= std::size_t(tree.size()) / 2) ++m_log_g;
+    m_g = 1 << m_log_g;
+    const int shift = kMaxDepth - m_log_g;
+    // Bucket range of each leaf, then a CSR fill in leaf order (so each bucket lists leaves ascending).
+    auto range = [&](const Cell& c, int d) {
+      const std::uint32_t a = d == 0 ? c.anchor.x : d == 1 ? c.anchor.y : c.anchor.z;
+      return std::pair<int, int>(int(a >> shift), int((a + c.size() - 1) >> shift));
+    };
+    m_begin.assign(std::size_t(m_g) * m_g * m_g + 1, 0);
+    for (int pass = 0; pass < 2; ++pass) {
+      std::vector<int> fill;
+      if (pass == 1) {
+        for (std::size_t b = 1; b < m_begin.size(); ++b) m_begin[b] += m_begin[b - 1];
+        m_leaf.resize(std::size_t(m_begin.back()));
+        fill.assign(m_begin.begin(), m_begin.end() - 1);
+      }
+      for (int l = 0; l < tree.size(); ++l) {
+        const Cell& c = tree.leaf(l);
+        const auto [x0, x1] = range(c, 0);
+        const auto [y0, y1] = range(c, 1);
+        const auto [z0, z1] = range(c, 2);
+        for (int z = z0; z <= z1; ++z)
+          for (int y = y0; y <= y1; ++y)
+            for (int x = x0; x <= x1; ++x) {
+              const std::size_t b = bucket(x, y, z);
+              if (pass == 0)
+                ++m_begin[b + 1];
+              else
+                m_leaf[std::size_t(fill[b]++)] = l;
+            }
+      }
+    }
+  }
+
+  // The leaf nearest to p (distance to the leaf box), the lowest index among equals.
+  [[nodiscard]] int nearest(const Vec3& p) const {
+    // Start from the bucket of p clamped into the root; buckets on ring r + 1 are at least r bucket edges away.
+    const double edge = m_root.size / m_g;
+    const Vec3 g = ((p - m_root.min) / edge).cwiseMax(0.0).cwiseMin(double(m_g) - 0.5);
+    const int cx = int(g.x()), cy = int(g.y()), cz = int(g.z());
+    double best = std::numeric_limits<double>::infinity();
+    int best_leaf = -1;
+    for (int r = 0; r < m_g; ++r) {
+      // Stop once no unvisited bucket can hold a leaf at least as near (with a margin for rounding).
+      const double bound = double(r - 1) * edge;
+      if (r >= 1 && bound > 0.0 && bound * bound > best * (1.0 + 1e-9)) break;
+      for (int z = std::max(cz - r, 0); z <= std::min(cz + r, m_g - 1); ++z)
+        for (int y = std::max(cy - r, 0); y <= std::min(cy + r, m_g - 1); ++y)
+          for (int x = std::max(cx - r, 0); x <= std::min(cx + r, m_g - 1); ++x) {
+            // Only the shell of the ring: the inside was visited before.
+            if (std::max({std::abs(x - cx), std::abs(y - cy), std::abs(z - cz)}) != r) continue;
+            const std::size_t b = bucket(x, y, z);
+            for (int i = m_begin[b]; i < m_begin[b + 1]; ++i) {
+              const int l = m_leaf[std::size_t(i)];
+              const double d = box_distance2(m_root.cell_box(m_tree.leaf(l)), p);
+              if (d < best || (d == best && l < best_leaf)) {
+                best = d;
+                best_leaf = l;
+              }
+            }
+          }
+    }
+    return best_leaf;
+  }
+
+ private:
+  [[nodiscard]] std::size_t bucket(int x, int y, int z) const {
+    return (std::size_t(z) * std::size_t(m_g) + std::size_t(y)) * std::size_t(m_g) + std::size_t(x);
+  }
+
+  const Octree& m_tree;
+  const RootGeometry& m_root;
+  int m_log_g = 0;
+  int m_g = 1;                 ///< buckets per axis
+  std::vector<int> m_begin;    ///< CSR row starts (G^3 + 1)
+  std::vector<int> m_leaf;     ///< leaves overlapping each bucket, ascending (nnz)
+};
+
+// Fallback embedding of p in `leaf`: extrapolated trilinear weights, projected into the allowed range.
+VertexEmbedding fallback_embedding(const Octree& tree, const RootGeometry& root, int leaf, const Vec3& p);
+
+// The regular embedding of p (leaf = -1 when p lies in no leaf).
+VertexEmbedding regular_embedding(const Octree& tree, const RootGeometry& root, const Vec3& p) {
+  VertexEmbedding e;
+  // Inside the root cube: the leaf that holds the vertex's finest cell, a binary search on the leaf codes.
+  const Box3 root_box{root.min, root.min + Vec3::Constant(root.size)};
+  if (root_box.contains(p)) e.leaf = tree.locate_cell(zcurve_cell(root, p));
+  if (e.leaf >= 0) e.weights = trilinear_weights(local_coordinates(root.cell_box(tree.leaf(e.leaf)), p));
+  return e;
+}
+
 }  // namespace
 
 GridPoint zcurve_cell(const RootGeometry& root, const Vec3& rest) {
@@ -202,28 +301,31 @@ std::array<double, 8> clamp_fallback_weights(const std::array<double, 8>& w) {
   return out;
 }
 
+namespace {
+VertexEmbedding fallback_embedding(const Octree& tree, const RootGeometry& root, int leaf, const Vec3& p) {
+  VertexEmbedding e;
+  e.leaf = leaf;
+  e.fallback = true;
+  e.weights = clamp_fallback_weights(trilinear_weights(local_coordinates(root.cell_box(tree.leaf(leaf)), p)));
+  return e;
+}
+}  // namespace
+
 VertexEmbedding embed_vertex(const Octree& tree, const RootGeometry& root, const Vec3& rest) {
   if (tree.size() == 0) throw std::invalid_argument("embed_vertex: the octree has no leaf");
-  VertexEmbedding e;
-  // Inside the root cube: the leaf that holds the vertex's finest cell, a binary search on the leaf codes.
-  const Box3 root_box{root.min, root.min + Vec3::Constant(root.size)};
-  if (root_box.contains(rest)) e.leaf = tree.locate_cell(zcurve_cell(root, rest));
-  if (e.leaf >= 0) {
-    e.weights = trilinear_weights(local_coordinates(root.cell_box(tree.leaf(e.leaf)), rest));
-    return e;
-  }
-  // Fallback: the nearest leaf box, the lower index on ties, with extrapolated weights kept in range.
+  const VertexEmbedding e = regular_embedding(tree, root, rest);
+  if (e.leaf >= 0) return e;
+  // Fallback: the nearest leaf box by a scan of all leaves, the lower index on ties.
   double best = std::numeric_limits<double>::infinity();
+  int leaf = -1;
   for (int i = 0; i < tree.size(); ++i) {
     const double d = box_distance2(root.cell_box(tree.leaf(i)), rest);
     if (d < best) {
       best = d;
-      e.leaf = i;
+      leaf = i;
     }
   }
-  e.fallback = true;
-  e.weights = clamp_fallback_weights(trilinear_weights(local_coordinates(root.cell_box(tree.leaf(e.leaf)), rest)));
-  return e;
+  return fallback_embedding(tree, root, leaf, rest);
 }
 
 SurfaceEmbedding::SurfaceEmbedding(const ObjectModel& model, std::vector<Vec3> rest,
@@ -260,9 +362,20 @@ void SurfaceEmbedding::check_triangles(const std::vector<std::array<int32_t, 3>>
 
 void SurfaceEmbedding::embed_and_compose(const ObjectModel& model, const std::vector<char>& redo) {
   const std::size_t nv = m_rest.size();
-  // Re-embed the flagged vertices (all of them when no flags are given).
-  for (std::size_t v = 0; v < nv; ++v)
-    if (redo.empty() || redo[v]) m_embedding[v] = embed_vertex(m_tree, m_root, m_rest[v]);
+  // Re-embed the flagged vertices (all of them when no flags are given); those in no leaf are collected.
+  if (m_tree.size() == 0) throw std::invalid_argument("SurfaceEmbedding: the model has no leaf");
+  std::vector<std::size_t> lost;
+  for (std::size_t v = 0; v < nv; ++v) {
+    if (!redo.empty() && !redo[v]) continue;
+    m_embedding[v] = regular_embedding(m_tree, m_root, m_rest[v]);
+    if (m_embedding[v].leaf < 0) lost.push_back(v);
+  }
+  // The fallback vertices go to the nearest leaf, found on a bucket grid built once for all of them.
+  if (!lost.empty()) {
+    const NearestLeafGrid grid(m_tree, m_root);
+    for (const std::size_t v : lost)
+      m_embedding[v] = fallback_embedding(m_tree, m_root, grid.nearest(m_rest[v]), m_rest[v]);
+  }
 
   // Compose through P: vertex v = sum_k w_k (P x)_(8 leaf + k), entries of one DOF summed in slot order.
   const DofMap& P = model.dofs();

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numeric>
 #include <stdexcept>
 #include <string>
 
@@ -395,8 +396,13 @@ void SurfaceEmbedding::embed_and_compose(const ObjectModel& model, const std::ve
       for (int i = P.slot_begin[s]; i < P.slot_begin[s + 1]; ++i)
         acc.emplace_back(P.slot_dof[std::size_t(i)], w * P.slot_weight[std::size_t(i)]);
     }
-    // Group by DOF, keeping the slot order within a DOF, and sum.
-    std::stable_sort(acc.begin(), acc.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    // Group by DOF, keeping the slot order within a DOF (a stable insertion sort: the lists are short), and sum.
+    for (std::size_t i = 1; i < acc.size(); ++i) {
+      const auto item = acc[i];
+      std::size_t j = i;
+      for (; j > 0 && acc[j - 1].first > item.first; --j) acc[j] = acc[j - 1];
+      acc[j] = item;
+    }
     for (std::size_t i = 0; i < acc.size();) {
       double w = 0.0;
       std::size_t j = i;
@@ -493,9 +499,16 @@ std::vector<int> SurfaceEmbedding::update(const ObjectModel& new_model, const Su
   // The Z-curve list: delete, renumber, insert.
   const std::vector<int> map = m_zcurve.update(edit.removed_vertices, edit.inserted_rest);
 
-  // Leaves kept from the old tree keep their vertices' weights, renumbered.
+  // Leaves kept from the old tree keep their vertices' weights, renumbered (nothing to match when the tree is the same).
+  const bool same_tree = new_model.tree().leaves() == m_tree.leaves();
   std::vector<char> kept_new;
-  const std::vector<int> old_to_new = match_leaves(m_tree, new_model.tree(), kept_new);
+  std::vector<int> old_to_new;
+  if (same_tree) {
+    old_to_new.resize(std::size_t(m_tree.size()));
+    std::iota(old_to_new.begin(), old_to_new.end(), 0);
+  } else {
+    old_to_new = match_leaves(m_tree, new_model.tree(), kept_new);
+  }
   std::vector<Vec3> rest(nv_new);
   std::vector<VertexEmbedding> embedding(nv_new);
   std::vector<char> redo(nv_new, 0);
@@ -519,7 +532,7 @@ std::vector<int> SurfaceEmbedding::update(const ObjectModel& new_model, const Su
   }
 
   // Vertices of new or changed leaves: two binary searches per leaf on the Z-curve list.
-  for (int j = 0; j < new_model.tree().size(); ++j)
+  for (int j = 0; j < (same_tree ? 0 : new_model.tree().size()); ++j)
     if (!kept_new[std::size_t(j)])
       for (const ZEntry& z : m_zcurve.in_cell(new_model.tree().leaf(j))) redo[std::size_t(z.vertex)] = 1;
   for (const int j : edit.changed_leaves)
@@ -529,7 +542,7 @@ std::vector<int> SurfaceEmbedding::update(const ObjectModel& new_model, const Su
   m_rest = std::move(rest);
   m_embedding = std::move(embedding);
   m_triangles = edit.triangles;
-  m_tree = new_model.tree();
+  if (!same_tree) m_tree = new_model.tree();
   embed_and_compose(new_model, redo);
   m_last_reembedded = int(std::count(redo.begin(), redo.end(), char(1)));
   build_adjacency();

@@ -95,9 +95,52 @@ void BM_EmbeddingBuild50k(benchmark::State& state) {
   }
 }
 
+// The full SurfaceEmbedding::update of a cut on a 10k-vertex surface: 2 mm ball of vertices removed, 100 inserted
+// inside it, the model unchanged (uniform trees of level 4, 5, 6). Includes the leaf matching (linear in the leaves)
+// and the recomposition of every vertex through P (linear in the vertices).
+void BM_SurfaceUpdateCut10k(benchmark::State& state) {
+  OctreeSpec spec;
+  spec.root = {Vec3::Zero(), 0.016};
+  spec.base_level = int(state.range(0));
+  spec.max_level = 8;
+  const ObjectModel m = ObjectModel::build(
+      spec, std::make_shared<BoxMaterial>(Box3{Vec3::Constant(0.001), Vec3::Constant(0.015)}), {}, {});
+  const TriMesh s = ellipsoid(Vec3::Constant(0.008), Vec3(0.0065, 0.006, 0.0055), 128, 79);
+  const SurfaceEmbedding start(m, s.vertices, s.triangles);
+  // The cut: vertices near the +x point of the equator go, 100 points on the ball's inner cap come; kept triangles
+  // survive.
+  const Vec3 spot = s.vertices[1 + 39 * 128];
+  SurfaceEdit edit;
+  std::vector<int> map(s.vertices.size(), -1);
+  int next = 0;
+  for (std::size_t v = 0; v < s.vertices.size(); ++v) {
+    if ((s.vertices[v] - spot).norm() < 0.002)
+      edit.removed_vertices.push_back(int(v));
+    else
+      map[v] = next++;
+  }
+  for (int i = 0; i < 100; ++i) {
+    const double c = 1.0 - 0.5 * (i + 0.5) / 100, sn = std::sqrt(1.0 - c * c), ph = 2.39996323 * i;
+    edit.inserted_rest.push_back(spot + 0.002 * Vec3(-c, sn * std::cos(ph), sn * std::sin(ph)));
+  }
+  for (const auto& t : s.triangles)
+    if (map[std::size_t(t[0])] >= 0 && map[std::size_t(t[1])] >= 0 && map[std::size_t(t[2])] >= 0)
+      edit.triangles.push_back({map[std::size_t(t[0])], map[std::size_t(t[1])], map[std::size_t(t[2])]});
+  for (auto _ : state) {
+    state.PauseTiming();
+    SurfaceEmbedding e = start;
+    state.ResumeTiming();
+    benchmark::DoNotOptimize(e.update(m, edit));
+  }
+  state.counters["leaves"] = m.num_elements();
+  state.counters["vertices"] = start.num_vertices();
+  state.counters["removed"] = double(edit.removed_vertices.size());
+}
+
 BENCHMARK(BM_DeformedPositions50k)->ArgName("threads")->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_DeformedNormals50k)->ArgName("threads")->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_EmbeddingBuild50k)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_SurfaceUpdateCut10k)->ArgName("level")->Arg(4)->Arg(5)->Arg(6)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

@@ -14,6 +14,7 @@
 #include "octocut/engine/material_graph_cache.hpp"
 #include "octocut/engine/mesh_io.hpp"
 #include "octocut/sim/material_graph.hpp"
+#include "octocut/engine/embedding_bench.hpp"
 #include "octocut/sim/simulator.hpp"
 #include "report.hpp"
 
@@ -190,6 +191,46 @@ std::vector<BenchOutput> bench_material_graph() {
   return {out};
 }
 
+// The 10k meniscus (m) and its material graph at 1 mm, loaded once per process.
+struct MeniscusInput {
+  sim::TriMesh surface;
+  std::shared_ptr<const sim::MaterialGraph> graph;
+};
+const MeniscusInput& meniscus10k() {
+  static const MeniscusInput in = [] {
+    MeniscusInput m;
+    m.surface = load_mesh(asset_path("meshes/meniscus_10k.ply"), MeshLoadOptions{0.001, true, false}).mesh;
+    m.graph = std::make_shared<sim::MaterialGraph>(material_graph_for(m.surface, 0.001).mesh);
+    return m;
+  }();
+  return in;
+}
+
+// Paper Fig. 6: correspondence update after a 100-vertex cut, Z-curve list against per-level lists, at one depth.
+std::vector<BenchOutput> bench_embedding(int depth) {
+  EmbeddingBenchOptions o;
+  o.min_depth = o.max_depth = depth;
+  const MeniscusInput& in = meniscus10k();
+  const EmbeddingBenchResult r = run_embedding_bench(in.surface, *in.graph, o).front();
+  BenchOutput b;
+  b.name = "embedding/depth" + std::to_string(depth);
+  b.runs = long(r.zcurve_ms.size());
+  b.ms = TimingSummary::of(r.zcurve_ms);
+  b.params = {{"mesh", "assets/meshes/meniscus_10k.ply"}, {"material", "material graph, cell 1 mm"},
+              {"depth", depth},
+              {"leaves", r.leaves},
+              {"naive_nodes", r.naive_nodes},
+              {"removed", r.removed},
+              {"ball_radius_m", o.ball_radius},
+              {"inserted_fallback", r.fallback}};
+  b.metrics = {{"zcurve_ms", median_of(r.zcurve_ms)},
+               {"naive_ms", median_of(r.naive_ms)},
+               {"zcurve_bind_ms", median_of(r.zcurve_bind_ms)},
+               {"vertices", r.vertices},
+               {"inserted", r.inserted}};
+  return {b};
+}
+
 struct Entry {
   std::string name;
   std::function<std::vector<BenchOutput>()> run;
@@ -199,7 +240,13 @@ std::vector<Entry> registry() {
   return {{"step/cube10", [] { return bench_step("cube10"); }},
           {"step/cube10-jacobi", [] { return bench_step("cube10-jacobi"); }},
           {"step/cube10-cholmod", [] { return bench_step("cube10-cholmod"); }},
-          {"material_graph/meniscus10k", [] { return bench_material_graph(); }}};
+          {"material_graph/meniscus10k", [] { return bench_material_graph(); }},
+          {"embedding/depth3", [] { return bench_embedding(3); }},
+          {"embedding/depth4", [] { return bench_embedding(4); }},
+          {"embedding/depth5", [] { return bench_embedding(5); }},
+          {"embedding/depth6", [] { return bench_embedding(6); }},
+          {"embedding/depth7", [] { return bench_embedding(7); }},
+          {"embedding/depth8", [] { return bench_embedding(8); }}};
 }
 
 std::string cpu_name() {

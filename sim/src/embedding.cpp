@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numeric>
 #include <stdexcept>
 #include <string>
 
@@ -72,6 +73,105 @@ std::vector<int> match_leaves(const Octree& old_tree, const Octree& tree, std::v
   return old_to_new;
 }
 
+// Nearest-leaf search for fallback vertices: a uniform grid of G^3 buckets over the root, each listing the leaves
+// whose box overlaps it, searched ring by ring around the point. Gives exactly the brute-force answer of
+// embed_vertex (same distance function, same tie-break) at a cost independent of the number of leaves far away.
+class NearestLeafGrid {
+ public:
+  NearestLeafGrid(const Octree& tree, const RootGeometry& root) : m_tree(tree), m_root(root) {
+    // About two leaves per bucket, at most 128^3 buckets; G is a power of two so buckets align with cells.
+    m_log_g = 0;
+    while (m_log_g < 7 && (std::size_t(1) << (3 * (m_log_g + 1))) <= std::size_t(tree.size()) / 2) ++m_log_g;
+    m_g = 1 << m_log_g;
+    const int shift = kMaxDepth - m_log_g;
+    // Bucket range of each leaf, then a CSR fill in leaf order (so each bucket lists leaves ascending).
+    auto range = [&](const Cell& c, int d) {
+      const std::uint32_t a = d == 0 ? c.anchor.x : d == 1 ? c.anchor.y : c.anchor.z;
+      return std::pair<int, int>(int(a >> shift), int((a + c.size() - 1) >> shift));
+    };
+    m_begin.assign(std::size_t(m_g) * m_g * m_g + 1, 0);
+    for (int pass = 0; pass < 2; ++pass) {
+      std::vector<int> fill;
+      if (pass == 1) {
+        for (std::size_t b = 1; b < m_begin.size(); ++b) m_begin[b] += m_begin[b - 1];
+        m_leaf.resize(std::size_t(m_begin.back()));
+        fill.assign(m_begin.begin(), m_begin.end() - 1);
+      }
+      for (int l = 0; l < tree.size(); ++l) {
+        const Cell& c = tree.leaf(l);
+        const auto [x0, x1] = range(c, 0);
+        const auto [y0, y1] = range(c, 1);
+        const auto [z0, z1] = range(c, 2);
+        for (int z = z0; z <= z1; ++z)
+          for (int y = y0; y <= y1; ++y)
+            for (int x = x0; x <= x1; ++x) {
+              const std::size_t b = bucket(x, y, z);
+              if (pass == 0)
+                ++m_begin[b + 1];
+              else
+                m_leaf[std::size_t(fill[b]++)] = l;
+            }
+      }
+    }
+  }
+
+  // The leaf nearest to p (distance to the leaf box), the lowest index among equals.
+  [[nodiscard]] int nearest(const Vec3& p) const {
+    // Start from the bucket of p clamped into the root; buckets on ring r + 1 are at least r bucket edges away.
+    const double edge = m_root.size / m_g;
+    const Vec3 g = ((p - m_root.min) / edge).cwiseMax(0.0).cwiseMin(double(m_g) - 0.5);
+    const int cx = int(g.x()), cy = int(g.y()), cz = int(g.z());
+    double best = std::numeric_limits<double>::infinity();
+    int best_leaf = -1;
+    for (int r = 0; r < m_g; ++r) {
+      // Stop once no unvisited bucket can hold a leaf at least as near (with a margin for rounding).
+      const double bound = double(r - 1) * edge;
+      if (r >= 1 && bound > 0.0 && bound * bound > best * (1.0 + 1e-9)) break;
+      for (int z = std::max(cz - r, 0); z <= std::min(cz + r, m_g - 1); ++z)
+        for (int y = std::max(cy - r, 0); y <= std::min(cy + r, m_g - 1); ++y)
+          for (int x = std::max(cx - r, 0); x <= std::min(cx + r, m_g - 1); ++x) {
+            // Only the shell of the ring: the inside was visited before.
+            if (std::max({std::abs(x - cx), std::abs(y - cy), std::abs(z - cz)}) != r) continue;
+            const std::size_t b = bucket(x, y, z);
+            for (int i = m_begin[b]; i < m_begin[b + 1]; ++i) {
+              const int l = m_leaf[std::size_t(i)];
+              const double d = box_distance2(m_root.cell_box(m_tree.leaf(l)), p);
+              if (d < best || (d == best && l < best_leaf)) {
+                best = d;
+                best_leaf = l;
+              }
+            }
+          }
+    }
+    return best_leaf;
+  }
+
+ private:
+  [[nodiscard]] std::size_t bucket(int x, int y, int z) const {
+    return (std::size_t(z) * std::size_t(m_g) + std::size_t(y)) * std::size_t(m_g) + std::size_t(x);
+  }
+
+  const Octree& m_tree;
+  const RootGeometry& m_root;
+  int m_log_g = 0;
+  int m_g = 1;                 ///< buckets per axis
+  std::vector<int> m_begin;    ///< CSR row starts (G^3 + 1)
+  std::vector<int> m_leaf;     ///< leaves overlapping each bucket, ascending (nnz)
+};
+
+// Fallback embedding of p in `leaf`: extrapolated trilinear weights, projected into the allowed range.
+VertexEmbedding fallback_embedding(const Octree& tree, const RootGeometry& root, int leaf, const Vec3& p);
+
+// The regular embedding of p (leaf = -1 when p lies in no leaf).
+VertexEmbedding regular_embedding(const Octree& tree, const RootGeometry& root, const Vec3& p) {
+  VertexEmbedding e;
+  // Inside the root cube: the leaf that holds the vertex's finest cell, a binary search on the leaf codes.
+  const Box3 root_box{root.min, root.min + Vec3::Constant(root.size)};
+  if (root_box.contains(p)) e.leaf = tree.locate_cell(zcurve_cell(root, p));
+  if (e.leaf >= 0) e.weights = trilinear_weights(local_coordinates(root.cell_box(tree.leaf(e.leaf)), p));
+  return e;
+}
+
 }  // namespace
 
 GridPoint zcurve_cell(const RootGeometry& root, const Vec3& rest) {
@@ -137,8 +237,25 @@ std::vector<int> ZCurveList::update(std::span<const int> removed, std::span<cons
   const bool one_by_one = denom <= 0.0 || double(n_new) < double(n) / denom;
   m_merged = !one_by_one;
   if (one_by_one) {
-    m_entries.reserve(n + n_new);
-    for (const ZEntry& e : added) m_entries.insert(std::upper_bound(m_entries.begin(), m_entries.end(), e), e);
+    // Each new entry finds its place by binary search (O(log n) each, on the part of the list not yet passed); the
+    // list then opens all gaps in one backward pass, so no element moves more than once.
+    std::sort(added.begin(), added.end());
+    std::vector<std::size_t> at(n_new);
+    std::size_t from = 0;
+    for (std::size_t i = 0; i < n_new; ++i) {
+      from = std::size_t(std::upper_bound(m_entries.begin() + std::ptrdiff_t(from), m_entries.end(), added[i]) -
+                         m_entries.begin());
+      at[i] = from;
+    }
+    m_entries.resize(n + n_new);
+    std::size_t end = n;
+    for (std::size_t i = n_new; i-- > 0;) {
+      // Shift the block [at[i], end) up by i + 1 places, then drop the new entry in front of it.
+      std::move_backward(m_entries.begin() + std::ptrdiff_t(at[i]), m_entries.begin() + std::ptrdiff_t(end),
+                         m_entries.begin() + std::ptrdiff_t(end + i + 1));
+      m_entries[at[i] + i] = added[i];
+      end = at[i];
+    }
   } else {
     std::sort(added.begin(), added.end());
     std::vector<ZEntry> merged(n + n_new);
@@ -185,28 +302,31 @@ std::array<double, 8> clamp_fallback_weights(const std::array<double, 8>& w) {
   return out;
 }
 
+namespace {
+VertexEmbedding fallback_embedding(const Octree& tree, const RootGeometry& root, int leaf, const Vec3& p) {
+  VertexEmbedding e;
+  e.leaf = leaf;
+  e.fallback = true;
+  e.weights = clamp_fallback_weights(trilinear_weights(local_coordinates(root.cell_box(tree.leaf(leaf)), p)));
+  return e;
+}
+}  // namespace
+
 VertexEmbedding embed_vertex(const Octree& tree, const RootGeometry& root, const Vec3& rest) {
   if (tree.size() == 0) throw std::invalid_argument("embed_vertex: the octree has no leaf");
-  VertexEmbedding e;
-  // Inside the root cube: the leaf that holds the vertex's finest cell, a binary search on the leaf codes.
-  const Box3 root_box{root.min, root.min + Vec3::Constant(root.size)};
-  if (root_box.contains(rest)) e.leaf = tree.locate_cell(zcurve_cell(root, rest));
-  if (e.leaf >= 0) {
-    e.weights = trilinear_weights(local_coordinates(root.cell_box(tree.leaf(e.leaf)), rest));
-    return e;
-  }
-  // Fallback: the nearest leaf box, the lower index on ties, with extrapolated weights kept in range.
+  const VertexEmbedding e = regular_embedding(tree, root, rest);
+  if (e.leaf >= 0) return e;
+  // Fallback: the nearest leaf box by a scan of all leaves, the lower index on ties.
   double best = std::numeric_limits<double>::infinity();
+  int leaf = -1;
   for (int i = 0; i < tree.size(); ++i) {
     const double d = box_distance2(root.cell_box(tree.leaf(i)), rest);
     if (d < best) {
       best = d;
-      e.leaf = i;
+      leaf = i;
     }
   }
-  e.fallback = true;
-  e.weights = clamp_fallback_weights(trilinear_weights(local_coordinates(root.cell_box(tree.leaf(e.leaf)), rest)));
-  return e;
+  return fallback_embedding(tree, root, leaf, rest);
 }
 
 SurfaceEmbedding::SurfaceEmbedding(const ObjectModel& model, std::vector<Vec3> rest,
@@ -243,9 +363,20 @@ void SurfaceEmbedding::check_triangles(const std::vector<std::array<int32_t, 3>>
 
 void SurfaceEmbedding::embed_and_compose(const ObjectModel& model, const std::vector<char>& redo) {
   const std::size_t nv = m_rest.size();
-  // Re-embed the flagged vertices (all of them when no flags are given).
-  for (std::size_t v = 0; v < nv; ++v)
-    if (redo.empty() || redo[v]) m_embedding[v] = embed_vertex(m_tree, m_root, m_rest[v]);
+  // Re-embed the flagged vertices (all of them when no flags are given); those in no leaf are collected.
+  if (m_tree.size() == 0) throw std::invalid_argument("SurfaceEmbedding: the model has no leaf");
+  std::vector<std::size_t> lost;
+  for (std::size_t v = 0; v < nv; ++v) {
+    if (!redo.empty() && !redo[v]) continue;
+    m_embedding[v] = regular_embedding(m_tree, m_root, m_rest[v]);
+    if (m_embedding[v].leaf < 0) lost.push_back(v);
+  }
+  // The fallback vertices go to the nearest leaf, found on a bucket grid built once for all of them.
+  if (!lost.empty()) {
+    const NearestLeafGrid grid(m_tree, m_root);
+    for (const std::size_t v : lost)
+      m_embedding[v] = fallback_embedding(m_tree, m_root, grid.nearest(m_rest[v]), m_rest[v]);
+  }
 
   // Compose through P: vertex v = sum_k w_k (P x)_(8 leaf + k), entries of one DOF summed in slot order.
   const DofMap& P = model.dofs();
@@ -265,8 +396,13 @@ void SurfaceEmbedding::embed_and_compose(const ObjectModel& model, const std::ve
       for (int i = P.slot_begin[s]; i < P.slot_begin[s + 1]; ++i)
         acc.emplace_back(P.slot_dof[std::size_t(i)], w * P.slot_weight[std::size_t(i)]);
     }
-    // Group by DOF, keeping the slot order within a DOF, and sum.
-    std::stable_sort(acc.begin(), acc.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    // Group by DOF, keeping the slot order within a DOF (a stable insertion sort: the lists are short), and sum.
+    for (std::size_t i = 1; i < acc.size(); ++i) {
+      const auto item = acc[i];
+      std::size_t j = i;
+      for (; j > 0 && acc[j - 1].first > item.first; --j) acc[j] = acc[j - 1];
+      acc[j] = item;
+    }
     for (std::size_t i = 0; i < acc.size();) {
       double w = 0.0;
       std::size_t j = i;
@@ -314,20 +450,31 @@ void SurfaceEmbedding::deformed_positions(const std::vector<Vec3>& x_dofs, std::
 
 void SurfaceEmbedding::deformed_normals(const std::vector<Vec3>& positions, std::vector<Vec3>& normals,
                                         Executor& exec) const {
+  std::vector<Vec3> face_normals;
+  deformed_normals(positions, normals, exec, face_normals);
+}
+
+void SurfaceEmbedding::deformed_normals(const std::vector<Vec3>& positions, std::vector<Vec3>& normals,
+                                        Executor& exec, std::vector<Vec3>& face_normals) const {
   if (positions.size() != m_rest.size())
     throw std::invalid_argument("SurfaceEmbedding::deformed_normals: " + std::to_string(positions.size()) +
                                 " positions for " + std::to_string(m_rest.size()) + " vertices");
+  // Face normals (twice the area times the unit normal), one task per triangle range.
+  face_normals.resize(m_triangles.size());
+  exec.parallel_for(int(m_triangles.size()), 4096, [&](int begin, int end) {
+    for (int t = begin; t < end; ++t) {
+      const auto& tri = m_triangles[std::size_t(t)];
+      const Vec3& a = positions[std::size_t(tri[0])];
+      face_normals[std::size_t(t)] = (positions[std::size_t(tri[1])] - a).cross(positions[std::size_t(tri[2])] - a);
+    }
+  });
+  // Each vertex sums its incident faces in triangle order, as sim::vertex_normals does, and normalises.
   normals.resize(m_rest.size());
   exec.parallel_for(num_vertices(), 2048, [&](int begin, int end) {
     for (int v = begin; v < end; ++v) {
-      // Sum the incident face normals (twice the area times the unit normal) in triangle order, then normalise.
       Vec3 n = Vec3::Zero();
-      for (int i = m_tri_begin[std::size_t(v)]; i < m_tri_begin[std::size_t(v) + 1]; ++i) {
-        const auto& t = m_triangles[std::size_t(m_tri[std::size_t(i)])];
-        const Vec3& a = positions[std::size_t(t[0])];
-        const Vec3 f = (positions[std::size_t(t[1])] - a).cross(positions[std::size_t(t[2])] - a);
-        n += f;
-      }
+      for (int i = m_tri_begin[std::size_t(v)]; i < m_tri_begin[std::size_t(v) + 1]; ++i)
+        n += face_normals[std::size_t(m_tri[std::size_t(i)])];
       const double len = n.norm();
       normals[std::size_t(v)] = len > 0.0 ? Vec3(n / len) : Vec3::Zero();
     }
@@ -352,9 +499,16 @@ std::vector<int> SurfaceEmbedding::update(const ObjectModel& new_model, const Su
   // The Z-curve list: delete, renumber, insert.
   const std::vector<int> map = m_zcurve.update(edit.removed_vertices, edit.inserted_rest);
 
-  // Leaves kept from the old tree keep their vertices' weights, renumbered.
+  // Leaves kept from the old tree keep their vertices' weights, renumbered (nothing to match when the tree is the same).
+  const bool same_tree = new_model.tree().leaves() == m_tree.leaves();
   std::vector<char> kept_new;
-  const std::vector<int> old_to_new = match_leaves(m_tree, new_model.tree(), kept_new);
+  std::vector<int> old_to_new;
+  if (same_tree) {
+    old_to_new.resize(std::size_t(m_tree.size()));
+    std::iota(old_to_new.begin(), old_to_new.end(), 0);
+  } else {
+    old_to_new = match_leaves(m_tree, new_model.tree(), kept_new);
+  }
   std::vector<Vec3> rest(nv_new);
   std::vector<VertexEmbedding> embedding(nv_new);
   std::vector<char> redo(nv_new, 0);
@@ -378,7 +532,7 @@ std::vector<int> SurfaceEmbedding::update(const ObjectModel& new_model, const Su
   }
 
   // Vertices of new or changed leaves: two binary searches per leaf on the Z-curve list.
-  for (int j = 0; j < new_model.tree().size(); ++j)
+  for (int j = 0; j < (same_tree ? 0 : new_model.tree().size()); ++j)
     if (!kept_new[std::size_t(j)])
       for (const ZEntry& z : m_zcurve.in_cell(new_model.tree().leaf(j))) redo[std::size_t(z.vertex)] = 1;
   for (const int j : edit.changed_leaves)
@@ -388,7 +542,7 @@ std::vector<int> SurfaceEmbedding::update(const ObjectModel& new_model, const Su
   m_rest = std::move(rest);
   m_embedding = std::move(embedding);
   m_triangles = edit.triangles;
-  m_tree = new_model.tree();
+  if (!same_tree) m_tree = new_model.tree();
   embed_and_compose(new_model, redo);
   m_last_reembedded = int(std::count(redo.begin(), redo.end(), char(1)));
   build_adjacency();

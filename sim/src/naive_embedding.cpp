@@ -87,9 +87,17 @@ std::vector<int> NaiveEmbedding::update(std::span<const int> removed, std::span<
   // Remove the deleted vertices from the lists of every level on their paths.
   for (const int v : removed) unfile(v, m_cell[std::size_t(v)]);
 
-  // Renumber every list of every node: the indices of all later vertices have shifted.
-  for (Node& node : m_nodes)
+  // Renumber the lists of every node: the indices of all later vertices have shifted. A node with an empty list has
+  // only empty lists below it (every vertex is filed on its whole path), so the walk skips those subtrees.
+  std::vector<std::int32_t> stack{0};
+  while (!stack.empty()) {
+    Node& node = m_nodes[std::size_t(stack.back())];
+    stack.pop_back();
+    if (node.vertices.empty()) continue;
     for (std::int32_t& v : node.vertices) v = map[std::size_t(v)];
+    for (const std::int32_t c : node.child)
+      if (c >= 0) stack.push_back(c);
+  }
   std::vector<GridPoint> cells(std::size_t(next) + inserted_rest.size());
   for (std::size_t v = 0; v < n_old; ++v)
     if (map[v] >= 0) cells[std::size_t(map[v])] = m_cell[v];

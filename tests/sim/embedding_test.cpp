@@ -243,6 +243,31 @@ TEST(SurfaceEmbedding, FallbackVerticesBindToTheNearestLeafWithClampedWeights) {
   EXPECT_EQ(*std::min_element(w1.begin(), w1.end()), kFallbackWeightMin);
 }
 
+TEST(SurfaceEmbedding, FallbackSearchMatchesTheBruteForceScan) {
+  // Two separate blocks of 0.5 mm leaves (3400 of them); points inside, between, around and beyond the root, some on
+  // the leaf lattice where distances tie.
+  OctreeSpec spec;
+  spec.root = kRoot;
+  spec.base_level = 5;
+  spec.max_level = 6;
+  const ObjectModel m = ObjectModel::build(
+      spec,
+      std::make_shared<BoxSetMaterial>(std::vector<Box3>{{Vec3(0.002, 0.003, 0.001), Vec3(0.009, 0.013, 0.006)},
+                                                         {Vec3(0.011, 0.0105, 0.0095), Vec3(0.015, 0.0145, 0.0135)}}),
+      {}, {});
+  ASSERT_GT(m.num_elements(), 2000);
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-0.004, 0.020);
+  std::uniform_int_distribution<int> lattice(-4, 36);
+  std::vector<Vec3> pts;
+  for (int i = 0; i < 1500; ++i) pts.push_back(Vec3(u(rng), u(rng), u(rng)));
+  for (int i = 0; i < 500; ++i) pts.push_back(0.0005 * Vec3(lattice(rng), lattice(rng), lattice(rng)));
+  const SurfaceEmbedding e(m, pts, {});
+  EXPECT_GT(e.num_fallback(), 1000);
+  for (std::size_t v = 0; v < pts.size(); ++v)
+    EXPECT_EQ(e.embeddings()[v], embed_vertex(m.tree(), m.root(), pts[v])) << "point " << v;
+}
+
 TEST(SurfaceEmbedding, ClampedWeightsAreTheProjectionOntoTheRange) {
   // KKT conditions of the Euclidean projection onto {lo <= w <= hi, sum w = 1}: w = clamp(raw - shift) for one shift.
   std::mt19937_64 rng(3);

@@ -74,7 +74,8 @@ inline constexpr double kFallbackWeightMax = 1.5;
 /// Binds rest point X (m) to the leaf that contains its finest cell, with trilinear weights. A point in no leaf
 /// falls back to the nearest leaf (distance from X to the leaf box; ties go to the lower leaf index) with
 /// extrapolated trilinear weights, projected onto [kFallbackWeightMin, kFallbackWeightMax]^8 with sum 1 (a common
-/// shift, then clamping). Throws std::invalid_argument when the tree has no leaf.
+/// shift, then clamping). This free function scans all leaves for the fallback; SurfaceEmbedding finds the same leaf
+/// on a bucket grid. Throws std::invalid_argument when the tree has no leaf.
 VertexEmbedding embed_vertex(const Octree& tree, const RootGeometry& root, const Vec3& rest);
 
 /// Projects weights onto {w in [kFallbackWeightMin, kFallbackWeightMax]^8, sum w = 1}; weights already inside are
@@ -115,6 +116,9 @@ class SurfaceEmbedding {
   /// Area-weighted unit vertex normals (|V|) of the mesh at `positions` (|V|, m), parallel over vertices; equal bit
   /// for bit to sim::vertex_normals(positions, triangles()).
   void deformed_normals(const std::vector<Vec3>& positions, std::vector<Vec3>& normals, Executor& exec) const;
+  /// The same with a caller-owned scratch array for the face normals (|F|, m^2), which saves its allocation per step.
+  void deformed_normals(const std::vector<Vec3>& positions, std::vector<Vec3>& normals, Executor& exec,
+                        std::vector<Vec3>& face_normals) const;
 
   /// Applies a cut: removes and inserts vertices (ZCurveList::update), replaces the triangles, re-embeds only the
   /// new vertices, the vertices of leaves that are new in `new_model` or listed in edit.changed_leaves, the vertices
@@ -132,7 +136,7 @@ class SurfaceEmbedding {
   [[nodiscard]] int last_reembedded() const { return m_last_reembedded; }
 
  private:
-  // Re-embeds the vertices flagged in `redo` in the tree `tree` (all when redo is empty) and recomposes everything.
+  // Re-embeds the vertices flagged in `redo` (all when redo is empty) in m_tree and recomposes all through P.
   void embed_and_compose(const ObjectModel& model, const std::vector<char>& redo);
   void build_adjacency();
   void check_triangles(const std::vector<std::array<int32_t, 3>>& triangles, std::size_t num_vertices) const;

@@ -225,7 +225,6 @@ std::vector<BenchOutput> bench_embedding(int depth) {
               {"inserted_fallback", r.fallback}};
   b.metrics = {{"zcurve_ms", median_of(r.zcurve_ms)},
                {"naive_ms", median_of(r.naive_ms)},
-               {"zcurve_bind_ms", median_of(r.zcurve_bind_ms)},
                {"vertices", r.vertices},
                {"inserted", r.inserted}};
   return {b};

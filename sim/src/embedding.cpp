@@ -207,13 +207,28 @@ std::span<const ZEntry> ZCurveList::in_cell(const Cell& c) const {
 }
 
 std::vector<int> ZCurveList::update(std::span<const int> removed, std::span<const Vec3> inserted_rest) {
+  std::vector<int> map;
+  update(removed, inserted_rest, map);
+  return map;
+}
+
+void ZCurveList::update(std::span<const int> removed, std::span<const Vec3> inserted_rest, std::vector<int>& map) {
   const std::size_t n_old = m_entries.size();
-  check_index_list(removed, n_old, "removed_vertices");
   check_finite(inserted_rest, "inserted vertex");
 
-  // Old-to-new map: kept vertices keep their relative order.
-  std::vector<int> map(n_old, 0);
-  for (const int v : removed) map[std::size_t(v)] = -1;
+  // Old-to-new map, which also finds bad and repeated indices before anything changes; kept vertices keep their
+  // relative order. All buffers are reused from call to call, so an update allocates nothing in steady state.
+  map.assign(n_old, 0);
+  for (std::size_t i = 0; i < removed.size(); ++i) {
+    const int v = removed[i];
+    if (v < 0 || std::size_t(v) >= n_old)
+      throw std::invalid_argument("removed_vertices[" + std::to_string(i) + "] = " + std::to_string(v) +
+                                  " is out of range [0, " + std::to_string(n_old) + ")");
+    if (map[std::size_t(v)] < 0)
+      throw std::invalid_argument("removed_vertices[" + std::to_string(i) + "] = " + std::to_string(v) +
+                                  " is listed twice");
+    map[std::size_t(v)] = -1;
+  }
   int next = 0;
   for (int& m : map) m = m < 0 ? -1 : next++;
 
@@ -228,9 +243,10 @@ std::vector<int> ZCurveList::update(std::span<const int> removed, std::span<cons
 
   // The new entries, numbered after the kept vertices.
   const std::size_t n = out, n_new = inserted_rest.size();
-  std::vector<ZEntry> added(n_new);
+  m_added.resize(n_new);
   for (std::size_t i = 0; i < n_new; ++i)
-    added[i] = {zcurve_code(m_root, inserted_rest[i]), std::int32_t(n + i)};
+    m_added[i] = {zcurve_code(m_root, inserted_rest[i]), std::int32_t(n + i)};
+  std::sort(m_added.begin(), m_added.end());
 
   // Paper §4.5: one by one when n' < n / (log2 n - 1), else sort the batch and merge.
   const double denom = std::log2(double(std::max<std::size_t>(n, 2))) - 1.0;
@@ -239,30 +255,31 @@ std::vector<int> ZCurveList::update(std::span<const int> removed, std::span<cons
   if (one_by_one) {
     // Each new entry finds its place by binary search (O(log n) each, on the part of the list not yet passed); the
     // list then opens all gaps in one backward pass, so no element moves more than once.
-    std::sort(added.begin(), added.end());
-    std::vector<std::size_t> at(n_new);
+    m_at.resize(n_new);
     std::size_t from = 0;
     for (std::size_t i = 0; i < n_new; ++i) {
-      from = std::size_t(std::upper_bound(m_entries.begin() + std::ptrdiff_t(from), m_entries.end(), added[i]) -
+      from = std::size_t(std::upper_bound(m_entries.begin() + std::ptrdiff_t(from), m_entries.end(), m_added[i]) -
                          m_entries.begin());
-      at[i] = from;
+      m_at[i] = from;
     }
     m_entries.resize(n + n_new);
     std::size_t end = n;
     for (std::size_t i = n_new; i-- > 0;) {
       // Shift the block [at[i], end) up by i + 1 places, then drop the new entry in front of it.
-      std::move_backward(m_entries.begin() + std::ptrdiff_t(at[i]), m_entries.begin() + std::ptrdiff_t(end),
+      std::move_backward(m_entries.begin() + std::ptrdiff_t(m_at[i]), m_entries.begin() + std::ptrdiff_t(end),
                          m_entries.begin() + std::ptrdiff_t(end + i + 1));
-      m_entries[at[i] + i] = added[i];
-      end = at[i];
+      m_entries[m_at[i] + i] = m_added[i];
+      end = m_at[i];
     }
   } else {
-    std::sort(added.begin(), added.end());
-    std::vector<ZEntry> merged(n + n_new);
-    std::merge(m_entries.begin(), m_entries.end(), added.begin(), added.end(), merged.begin());
-    m_entries = std::move(merged);
+    // Merge from the back into the grown list: no second buffer.
+    m_entries.resize(n + n_new);
+    std::size_t a = n, b = n_new, o = n + n_new;
+    while (b > 0) {
+      if (a > 0 && m_added[b - 1] < m_entries[a - 1]) m_entries[--o] = m_entries[--a];
+      else m_entries[--o] = m_added[--b];
+    }
   }
-  return map;
 }
 
 std::array<double, 8> clamp_fallback_weights(const std::array<double, 8>& w) {

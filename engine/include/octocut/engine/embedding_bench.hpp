@@ -56,7 +56,6 @@ struct EmbeddingBenchResult {
   int inserted = 0;               ///< vertices added by the cut
   int fallback = 0;               ///< inserted vertices that lie in no leaf
   std::vector<double> zcurve_ms;       ///< per run: Z-curve list update (delete, renumber, insert), paper §4.5
-  std::vector<double> zcurve_bind_ms;  ///< per run: binding the new vertices to leaves (binary search on the tree)
   std::vector<double> naive_ms;   ///< per run: removal, renumbering and insertion on every level of the naive tree
 };
 

@@ -50,6 +50,8 @@ class ZCurveList {
   /// sorted and merged. Returns the old-to-new index map, -1 for a removed vertex (old size). Throws
   /// std::invalid_argument for an index out of range, a duplicate, or a non-finite inserted point.
   std::vector<int> update(std::span<const int> removed, std::span<const Vec3> inserted_rest);
+  /// The same, writing the map into `map` (resized), so that a long-lived caller allocates nothing per update.
+  void update(std::span<const int> removed, std::span<const Vec3> inserted_rest, std::vector<int>& map);
   /// True when the last update() took the sort-and-merge branch.
   [[nodiscard]] bool last_update_merged() const { return m_merged; }
 
@@ -57,6 +59,8 @@ class ZCurveList {
   RootGeometry m_root;
   std::vector<ZEntry> m_entries;  ///< sorted by (code, vertex) (|V|)
   bool m_merged = false;
+  std::vector<ZEntry> m_added;       ///< scratch of update(): the new entries, sorted (n')
+  std::vector<std::size_t> m_at;     ///< scratch of update(): insertion points (n')
 };
 
 /// A rest point bound to a leaf by 8 weights of the leaf's corners (corner bits as in Cell::corner).

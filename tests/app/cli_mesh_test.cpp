@@ -137,6 +137,33 @@ TEST_F(CliMeshTest, SurfaceOutputsAreTheRestAndDeformedSurfaces) {
   }
 }
 
+TEST_F(CliMeshTest, ShippedMeniscusRestSceneRunsFinite) {
+  // The shipped scene, shortened: the 10k meniscus held at both horns sags under gravity and stays finite.
+  const std::string scene_file = std::string(OCTOCUT_SOURCE_DIR) + "/assets/scenes/meniscus_rest.json";
+  const CommandResult r = run_octocut("run '" + scene_file + "' --out '" + (m_dir / "out").string() +
+                                      "' --quiet --set /duration=0.1 --set /output/surface_final=false");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json j = report();
+  EXPECT_EQ(j["status"], "ok");
+  EXPECT_EQ(j["stability"]["finite"], true);
+  EXPECT_EQ(j["counts"]["surface_vertices"], 10022);
+  EXPECT_EQ(j["counts"]["surface_triangles"], 20040);
+  EXPECT_GT(j["counts"]["tets"].get<int>(), 5000);
+  EXPECT_GT(j["counts"]["elements"].get<int>(), 1000);
+  EXPECT_EQ(j["surface"]["closed"], true);
+  EXPECT_EQ(j["surface"]["self_intersecting"], false);
+  EXPECT_EQ(j["surface"]["components"], 1);
+  // The generator's volume of meniscus_10k.ply: 2513.679 mm^3.
+  EXPECT_NEAR(j["surface"]["rest_volume_m3"].get<double>(), 2.513679e-6, 1e-12);
+  // Held only at the horns, the body sags; less at the inner rim than at the periphery, which is further from the
+  // horns' line.
+  const double periphery = j["probes"]["body_periphery"]["displacement"][2].get<double>();
+  const double rim = j["probes"]["inner_rim"]["displacement"][2].get<double>();
+  EXPECT_LT(periphery, 0.0);
+  EXPECT_LT(rim, 0.0);
+  EXPECT_LT(periphery, rim);
+}
+
 TEST_F(CliMeshTest, InvertedMeshIsReorientedWithAWarning) {
   write("inverted.obj", cube_obj(true));
   ASSERT_EQ(run(scene("inverted.obj")).exit_code, 0);

@@ -11,7 +11,10 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "octocut/engine/frame_writer.hpp"
 #include "octocut/engine/io.hpp"
+#include "octocut/engine/render_builder.hpp"
+#include "octocut/engine/renderer.hpp"
 #include "octocut/engine/scene_loader.hpp"
 #include "report.hpp"
 
@@ -112,12 +115,6 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
   result.report_path = (out / "report.json").string();
 
   // Everything that is bad input is found before the output directory is touched.
-  if (scene.render.enabled && !options.no_render) {
-    result.exit_code = 2;
-    result.error = scene.file + ": /render/enabled: rendering was requested, but this build has no renderer yet "
-                                "(EGL rendering lands with the rendering issue); run with --no-render";
-    return result;
-  }
   std::optional<sim::ObjectModel> model;
   try {
     model = build_object(scene);
@@ -137,6 +134,30 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
   Report report;
   report.scene = scene.file;
   report.name = scene.name;
+
+  // The renderer starts only when asked for and not vetoed; if EGL cannot start, the run ends with exit 2 and the
+  // EGL error, with the report written.
+  const bool rendering = scene.render.enabled && !options.no_render;
+  std::unique_ptr<Renderer> renderer;
+  if (rendering) {
+    try {
+      renderer = make_renderer();
+    } catch (const std::exception& e) {
+      result.exit_code = 2;
+      result.error = scene.file + ": /render/enabled: cannot start the renderer: " + e.what() +
+                     " (run with --no-render to skip rendering)";
+      report.status = "failed";
+      report.error = result.error;
+      try {
+        write_file_atomic(result.report_path, report_json(report));
+      } catch (const std::exception&) {
+        // The render error is the one to report.
+      }
+      return result;
+    }
+  }
+  std::vector<double> render_ms;
+  std::unique_ptr<FrameWriter> writer;
   const auto wall0 = Clock::now();
   std::vector<double> step_ms;
   g_interrupted = false;
@@ -166,6 +187,41 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
       report.warnings.push_back("/output: surface output needs an embedded mesh surface (geometry issue); none written");
     if (scene.output.frames && options.no_render)
       report.warnings.push_back("/output/frames: --no-render given, no frames written");
+    if (scene.output.frames && !scene.render.enabled)
+      report.warnings.push_back("/output/frames: render.enabled is false, no frames written");
+
+    // Rendering: the tissue surface bound to the octree once, a frame every `every` steps from the rest state on.
+    EmbeddedSurface tissue;
+    Camera camera;
+    std::vector<sim::Vec3> slots;
+    long frame = 0;
+    const auto render_frame = [&] {
+      const auto t0 = Clock::now();
+      RenderScene rs;
+      rs.width = scene.render.width;
+      rs.height = scene.render.height;
+      rs.msaa = scene.render.msaa;
+      rs.camera = camera;
+      m.dofs().prolong(sim.state().x, slots);
+      rs.meshes.push_back(tissue_mesh(m, tissue, slots));
+      add_overlays(rs, scene.render.overlays, m, slots, sim.state().x);
+      Image image = renderer->render(rs);
+      render_ms.push_back(ms_since(t0));
+      if (writer) writer->push(frame, std::move(image));
+      ++frame;
+    };
+    if (rendering) {
+      const sim::Box3 box = box3(scene.object.surface_box);
+      tissue = embed_surface(m, box_surface(box, 32));
+      camera = make_camera(scene.render.camera, box);
+      if (scene.output.frames) {
+        const fs::path frames_dir = out / "frames";
+        fs::create_directories(frames_dir, ec);
+        if (ec) throw std::runtime_error(frames_dir.string() + ": cannot create the frames directory: " + ec.message());
+        writer = std::make_unique<FrameWriter>(frames_dir, 4);
+      }
+      render_frame();
+    }
 
     // Timeline: fixed steps of dt up to the duration.
     const long steps = step_count(scene);
@@ -177,6 +233,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
       sim.step();
       step_ms.push_back(ms_since(t0));
       report.steps = i + 1;
+      if (rendering && (i + 1) % scene.render.every == 0) render_frame();
       if (tty && (ms_since(last_progress) > 200.0 || i + 1 == steps)) {
         last_progress = Clock::now();
         std::fprintf(stderr, "\r[octocut] step %ld/%ld  t = %.4f s  %.2f ms/step   ", i + 1, steps, sim.state().t,
@@ -211,6 +268,8 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
     if (st.newton_unconverged > 0)
       report.warnings.push_back(std::to_string(st.newton_unconverged) + " static solves stopped unconverged");
     if (!finite) throw std::runtime_error("the state is not finite");
+    // Every queued frame is on disk before the run counts as done.
+    if (writer) writer->finish();
   } catch (const std::exception& e) {
     report.status = "failed";
     report.error = e.what();
@@ -220,6 +279,19 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
   std::signal(SIGINT, old_int);
   std::signal(SIGTERM, old_term);
 
+  // A failed run still keeps every frame written before the failure.
+  if (writer) {
+    try {
+      writer->finish();
+    } catch (const std::exception&) {
+      // Already reported through the run's error.
+    }
+    report.frame_write_ms = TimingSummary::of(writer->write_ms());
+    report.frames = writer->written();
+    writer.reset();
+  }
+  report.render_ms = TimingSummary::of(render_ms);
+  report.frames_rendered = long(render_ms.size());
   report.step_ms = TimingSummary::of(step_ms);
   report.wall_time_s = ms_since(wall0) / 1000.0;
   try {

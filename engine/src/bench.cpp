@@ -3,13 +3,18 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <cmath>
 #include <fstream>
+#include <numbers>
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <thread>
 
+#include "octocut/engine/frame_writer.hpp"
+#include "octocut/engine/renderer.hpp"
 #include "octocut/sim/simulator.hpp"
+#include "octocut/sim/surface.hpp"
 #include "report.hpp"
 
 namespace octocut::engine {
@@ -130,6 +135,101 @@ std::vector<BenchOutput> bench_step(const std::string& variant) {
   return {b};
 }
 
+// ---- render/1280x720: render and PNG encode time per frame (SPEC §7) --------------------------------------------
+
+// A closed UV ellipsoid with semi-axes a (m) and about `vertices` vertices: the stand-in for the meniscus meshes.
+sim::TriMesh ellipsoid_mesh(const sim::Vec3& a, int vertices) {
+  // segments * (rings - 1) + 2 vertices with rings ~ segments / 1.6.
+  const int segments = std::max(8, int(std::lround(std::sqrt(1.6 * vertices))));
+  const int rings = std::max(3, int(std::lround(double(vertices - 2) / segments)) + 1);
+  sim::TriMesh m;
+  m.vertices.push_back({0.0, 0.0, a.z()});
+  for (int r = 1; r < rings; ++r) {
+    const double theta = std::numbers::pi * r / rings;
+    for (int k = 0; k < segments; ++k) {
+      const double phi = 2.0 * std::numbers::pi * k / segments;
+      m.vertices.push_back({a.x() * std::sin(theta) * std::cos(phi), a.y() * std::sin(theta) * std::sin(phi),
+                            a.z() * std::cos(theta)});
+    }
+  }
+  m.vertices.push_back({0.0, 0.0, -a.z()});
+  const int south = int(m.vertices.size()) - 1;
+  const auto at = [&](int r, int k) { return 1 + (r - 1) * segments + (k % segments); };
+  // Caps and bands, counter-clockwise seen from outside.
+  for (int k = 0; k < segments; ++k) {
+    m.triangles.push_back({0, at(1, k), at(1, k + 1)});
+    m.triangles.push_back({south, at(rings - 1, k + 1), at(rings - 1, k)});
+    for (int r = 1; r + 1 < rings; ++r) {
+      m.triangles.push_back({at(r, k), at(r + 1, k), at(r + 1, k + 1)});
+      m.triangles.push_back({at(r, k), at(r + 1, k + 1), at(r, k + 1)});
+    }
+  }
+  return m;
+}
+
+// Renders `mesh` as tissue at 1280 x 720 (4x MSAA, a light at the lens) from 30 slightly different views and
+// PNG-encodes every frame (level 1, sub filter; level 1 without filtering as a comparison).
+BenchOutput bench_render_mesh(const std::string& label, const sim::TriMesh& mesh) {
+  const int width = 1280, height = 720, frames = 30;
+  std::unique_ptr<Renderer> renderer = make_renderer();
+  RenderScene scene;
+  scene.width = width;
+  scene.height = height;
+  RenderMesh tissue;
+  for (const sim::Vec3& v : mesh.vertices) tissue.positions.push_back(v.cast<float>());
+  tissue.triangles = mesh.triangles;
+  tissue.normals = mesh_normals(tissue.positions, tissue.triangles);
+  scene.meshes.push_back(std::move(tissue));
+  const sim::Box3 box = sim::bounds(mesh);
+  const Eigen::Vector3d centre = 0.5 * (box.min + box.max);
+  const double radius = 0.5 * (box.max - box.min).norm();
+  scene.camera.target = centre;
+  scene.camera.fov_deg = 60.0;
+  scene.camera.near = 1e-3 * radius;
+  scene.camera.far = 10.0 * radius;
+  scene.camera.arthroscope = true;
+
+  // Warm up (shader compilation, framebuffers), then time each frame.
+  scene.camera.position = centre + Eigen::Vector3d(0.0, -2.0 * radius, 1.2 * radius);
+  renderer->render(scene);
+  std::vector<double> render_ms, encode_ms, encode_none_ms;
+  std::size_t png_bytes = 0;
+  for (int f = 0; f < frames; ++f) {
+    const double angle = 0.02 * f;
+    scene.camera.position =
+        centre + Eigen::Vector3d(2.0 * radius * std::sin(angle), -2.0 * radius * std::cos(angle), 1.2 * radius);
+    auto t0 = Clock::now();
+    const Image image = renderer->render(scene);
+    render_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+    t0 = Clock::now();
+    png_bytes = encode_png(image, 1, true).size();
+    encode_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+    t0 = Clock::now();
+    (void)encode_png(image, 1, false);
+    encode_none_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+  }
+  BenchOutput b;
+  b.name = "render/1280x720/" + label;
+  b.runs = frames;
+  b.ms = TimingSummary::of(render_ms);
+  b.params = {{"width", width}, {"height", height}, {"msaa", scene.msaa}, {"mesh", label},
+              {"vertices", mesh.num_vertices()}, {"triangles", mesh.num_triangles()},
+              {"renderer", renderer->description()}, {"png", "zlib level 1, sub filter"}};
+  b.metrics = {{"render_ms", median_of(render_ms)},
+               {"render_p95_ms", TimingSummary::of(render_ms).p95},
+               {"encode_ms", median_of(encode_ms)},
+               {"encode_nofilter_ms", median_of(encode_none_ms)},
+               {"png_bytes", png_bytes}};
+  return b;
+}
+
+std::vector<BenchOutput> bench_render() {
+  // Stand-ins for assets/meshes/meniscus_10k.ply and meniscus_50k.ply (45 x 27 x 8 mm) until mesh loading lands.
+  const sim::Vec3 semi_axes(0.0225, 0.0135, 0.004);
+  return {bench_render_mesh("10k", ellipsoid_mesh(semi_axes, 10000)),
+          bench_render_mesh("50k", ellipsoid_mesh(semi_axes, 50000))};
+}
+
 struct Entry {
   std::string name;
   std::function<std::vector<BenchOutput>()> run;
@@ -138,7 +238,8 @@ struct Entry {
 std::vector<Entry> registry() {
   return {{"step/cube10", [] { return bench_step("cube10"); }},
           {"step/cube10-jacobi", [] { return bench_step("cube10-jacobi"); }},
-          {"step/cube10-cholmod", [] { return bench_step("cube10-cholmod"); }}};
+          {"step/cube10-cholmod", [] { return bench_step("cube10-cholmod"); }},
+          {"render/1280x720", [] { return bench_render(); }}};
 }
 
 std::string cpu_name() {

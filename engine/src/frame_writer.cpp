@@ -112,8 +112,8 @@ std::filesystem::path frame_path(const std::filesystem::path& dir, long index) {
   return dir / name;
 }
 
-FrameWriter::FrameWriter(std::filesystem::path dir, std::size_t capacity)
-    : m_dir(std::move(dir)), m_capacity(capacity == 0 ? 1 : capacity) {
+FrameWriter::FrameWriter(std::filesystem::path dir, std::size_t capacity, Hook before_write)
+    : m_dir(std::move(dir)), m_capacity(capacity == 0 ? 1 : capacity), m_before_write(std::move(before_write)) {
   m_thread = std::thread([this] { run(); });
 }
 
@@ -180,6 +180,7 @@ void FrameWriter::run() {
 
     // Encode and write atomically; the first failure ends the writer and drops the rest of the queue.
     try {
+      if (m_before_write) m_before_write(job.index);
       const auto t0 = Clock::now();
       write_file_atomic(frame_path(m_dir, job.index), encode_png(job.image));
       const double ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();

@@ -152,6 +152,7 @@ EglDisplay open_display(std::string& platform) {
 
   // EGL devices: the one chosen by the environment, or the first that initialises.
   const char* chosen = std::getenv("OCTOCUT_EGL_DEVICE");
+  std::string tried;  // what was attempted, for the error message
   if (has("EGL_EXT_platform_device") && has("EGL_EXT_device_enumeration")) {
     EGLDeviceEXT devices[32];
     EGLint count = 0;
@@ -167,6 +168,7 @@ EglDisplay open_display(std::string& platform) {
       platform = "EGL device " + std::to_string(index);
       return display;
     }
+    tried = std::to_string(count) + " EGL device(s) tried";
     for (EGLint i = 0; i < count; ++i) {
       EglDisplay display = initialise(eglGetPlatformDisplayEXT(EGL_PLATFORM_DEVICE_EXT, devices[i], nullptr));
       if (display.get() != EGL_NO_DISPLAY) {
@@ -174,12 +176,16 @@ EglDisplay open_display(std::string& platform) {
         return display;
       }
     }
-  } else if (chosen != nullptr && *chosen != '\0') {
+  } else {
+    tried = "no EGL_EXT_platform_device";
+  }
+  if (!has("EGL_EXT_platform_device") && chosen != nullptr && *chosen != '\0') {
     throw RenderError("EGL: OCTOCUT_EGL_DEVICE is set but EGL_EXT_platform_device is not available: " +
                       egl_error_text(eglGetError()));
   }
 
   // Fallback: Mesa's surfaceless platform.
+  tried += has("EGL_MESA_platform_surfaceless") ? ", the surfaceless platform tried" : ", no EGL_MESA_platform_surfaceless";
   if (has("EGL_MESA_platform_surfaceless")) {
     EglDisplay display = initialise(eglGetPlatformDisplayEXT(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr));
     if (display.get() != EGL_NO_DISPLAY) {
@@ -187,7 +193,7 @@ EglDisplay open_display(std::string& platform) {
       return display;
     }
   }
-  egl_fail("no EGL device or surfaceless display could be initialised");
+  egl_fail("no EGL device or surfaceless display could be initialised (" + tried + ")");
 }
 
 // ---- shaders --------------------------------------------------------------------------------------------------------
@@ -228,7 +234,7 @@ void main() {
   if (!gl_FrontFacing) n = -n;
   vec3 v = normalize(u_eye - v_world);
   vec3 base = u_base;
-  if (u_has_cut != 0 && texelFetch(u_cut, gl_PrimitiveID).r > 0.5) base = u_cut_color;
+  if (u_has_cut != 0 && texelFetch(u_cut, gl_PrimitiveID).r > 0.0) base = u_cut_color;
   vec3 color = u_ambient * base;
   for (int i = 0; i < u_light_count; ++i) {
     vec3 l = normalize(u_light_position[i] - v_world);

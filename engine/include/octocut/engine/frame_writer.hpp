@@ -5,6 +5,7 @@
 #include <deque>
 #include <exception>
 #include <filesystem>
+#include <functional>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -30,8 +31,12 @@ std::filesystem::path frame_path(const std::filesystem::path& dir, long index);
 /// failure stops the writer; later pushes and finish() rethrow it, and every frame written before it stays on disk.
 class FrameWriter {
  public:
-  /// Starts the writer thread; `dir` must exist. `capacity` >= 1 frames.
-  explicit FrameWriter(std::filesystem::path dir, std::size_t capacity = 4);
+  /// Called on the writer thread before each frame is encoded, with the frame's index. Tests use it to stall or
+  /// observe the writer; an exception it throws fails the writer like a write error.
+  using Hook = std::function<void(long index)>;
+
+  /// Starts the writer thread; `dir` must exist. `capacity` >= 1 frames (0 is taken as 1).
+  explicit FrameWriter(std::filesystem::path dir, std::size_t capacity = 4, Hook before_write = {});
   /// Finishes the frames still queued and joins the thread (errors are swallowed here; call finish() to see them).
   ~FrameWriter();
   FrameWriter(const FrameWriter&) = delete;
@@ -58,6 +63,7 @@ class FrameWriter {
   };
   std::filesystem::path m_dir;
   std::size_t m_capacity;
+  Hook m_before_write;
   mutable std::mutex m_mutex;
   std::condition_variable m_not_full, m_not_empty;
   std::deque<Job> m_queue;           ///< frames waiting to be written (<= m_capacity)

@@ -23,7 +23,7 @@ struct RenderMesh {
   std::vector<Eigen::Vector3f> positions;         ///< vertex positions, m (|V|)
   std::vector<Eigen::Vector3f> normals;           ///< unit vertex normals (|V|); empty: computed by the renderer
   std::vector<std::array<std::int32_t, 3>> triangles;  ///< counter-clockwise vertex indices (|F|)
-  std::vector<std::uint8_t> cut;                  ///< 1 for a cut face, tinted (|F|, or empty: no cut face)
+  std::vector<std::uint8_t> cut;                  ///< non-zero for a cut face, tinted (|F|, or empty: none)
   MaterialKind material = MaterialKind::tissue;
   Eigen::Matrix4f model = Eigen::Matrix4f::Identity();  ///< model-to-world transform (rigid, metres)
 };

@@ -168,7 +168,8 @@ sim::TriMesh ellipsoid_mesh(const sim::Vec3& a, int vertices) {
 }
 
 // Renders `mesh` as tissue at 1280 x 720 (4x MSAA, a light at the lens) from 30 slightly different views and
-// PNG-encodes every frame (level 1, sub filter; level 1 without filtering as a comparison).
+// PNG-encodes every frame (level 1, sub filter; level 1 without filtering as a comparison). The same views without
+// multisampling are timed as well (render_msaa1_ms).
 BenchOutput bench_render_mesh(const std::string& label, const sim::TriMesh& mesh) {
   const int width = 1280, height = 720, frames = 30;
   std::unique_ptr<Renderer> renderer = make_renderer();
@@ -192,7 +193,7 @@ BenchOutput bench_render_mesh(const std::string& label, const sim::TriMesh& mesh
   // Warm up (shader compilation, framebuffers), then time each frame.
   scene.camera.position = centre + Eigen::Vector3d(0.0, -2.0 * radius, 1.2 * radius);
   renderer->render(scene);
-  std::vector<double> render_ms, encode_ms, encode_none_ms;
+  std::vector<double> render_ms, render_msaa1_ms, encode_ms, encode_none_ms;
   std::size_t png_bytes = 0;
   for (int f = 0; f < frames; ++f) {
     const double angle = 0.02 * f;
@@ -208,6 +209,18 @@ BenchOutput bench_render_mesh(const std::string& label, const sim::TriMesh& mesh
     (void)encode_png(image, 1, false);
     encode_none_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
   }
+  // The same views with one sample per pixel.
+  scene.msaa = 1;
+  renderer->render(scene);
+  for (int f = 0; f < frames; ++f) {
+    const double angle = 0.02 * f;
+    scene.camera.position =
+        centre + Eigen::Vector3d(2.0 * radius * std::sin(angle), -2.0 * radius * std::cos(angle), 1.2 * radius);
+    const auto t0 = Clock::now();
+    (void)renderer->render(scene);
+    render_msaa1_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+  }
+  scene.msaa = 4;
   BenchOutput b;
   b.name = "render/1280x720/" + label;
   b.runs = frames;
@@ -217,6 +230,7 @@ BenchOutput bench_render_mesh(const std::string& label, const sim::TriMesh& mesh
               {"renderer", renderer->description()}, {"png", "zlib level 1, sub filter"}};
   b.metrics = {{"render_ms", median_of(render_ms)},
                {"render_p95_ms", TimingSummary::of(render_ms).p95},
+               {"render_msaa1_ms", median_of(render_msaa1_ms)},
                {"encode_ms", median_of(encode_ms)},
                {"encode_nofilter_ms", median_of(encode_none_ms)},
                {"png_bytes", png_bytes}};

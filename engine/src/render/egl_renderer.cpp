@@ -414,7 +414,8 @@ class EglRenderer final : public Renderer {
     glClearDepth(1.0);
     glEnable(GL_DEPTH_TEST);
     glDepthFunc(GL_LESS);
-    glDisable(GL_CULL_FACE);
+    glCullFace(GL_BACK);
+    glFrontFace(GL_CCW);
     glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
     glBindVertexArray(m_vao);
 
@@ -436,6 +437,7 @@ class EglRenderer final : public Renderer {
     glPolygonOffset(1.0f, 1.0f);
     for (const RenderMesh& mesh : scene.meshes) draw_mesh(mesh);
     glDisable(GL_POLYGON_OFFSET_FILL);
+    glDisable(GL_CULL_FACE);
 
     // Overlays: lines depth-tested against the meshes, points on top.
     glUseProgram(m_overlay_program);
@@ -552,6 +554,11 @@ class EglRenderer final : public Renderer {
       glBindTexture(GL_TEXTURE_BUFFER, m_cut_texture);
       glTexBuffer(GL_TEXTURE_BUFFER, GL_R8, m_cut_buffer);
     }
+    // Closed meshes hide their back faces anyway: culling them halves llvmpipe's rasterisation work.
+    if (mesh.cull_back_faces)
+      glEnable(GL_CULL_FACE);
+    else
+      glDisable(GL_CULL_FACE);
     glDrawElements(GL_TRIANGLES, GLsizei(3 * mesh.triangles.size()), GL_UNSIGNED_INT, nullptr);
   }
 

@@ -26,6 +26,9 @@ struct RenderMesh {
   std::vector<std::uint8_t> cut;                  ///< non-zero for a cut face, tinted (|F|, or empty: none)
   MaterialKind material = MaterialKind::tissue;
   Eigen::Matrix4f model = Eigen::Matrix4f::Identity();  ///< model-to-world transform (rigid, metres)
+  /// Skip triangles seen from behind: right for closed, outward-oriented meshes; false for open ones, which are then
+  /// lit on both sides.
+  bool cull_back_faces = true;
 };
 
 /// A point light. The first light of an arthroscope camera sits at the lens.

@@ -8,7 +8,7 @@ bool renderer_available() { return false; }
 
 std::unique_ptr<Renderer> make_renderer() {
   throw RenderError("this build of octocut has no renderer (built without EGL: configure with OCTOCUT_WITH_EGL=ON "
-                    "and install libegl-dev and libepoxy-dev); run with --no-render");
+                    "and install libegl-dev and libepoxy-dev)");
 }
 
 }  // namespace octocut::engine

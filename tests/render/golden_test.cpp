@@ -272,3 +272,35 @@ TEST_F(GoldenTest, DebugOverlays) {
 
 }  // namespace
 }  // namespace octocut::engine
+
+namespace octocut::engine {
+namespace {
+
+TEST_F(GoldenTest, BadScenesAreErrorsNotCrashes) {
+  RenderScene scene = base_scene();
+  RenderMesh mesh = sphere({0, 0, 0}, 1.0f, 8, 4, MaterialKind::tissue);
+  // A triangle index past the vertices.
+  RenderMesh bad_index = mesh;
+  bad_index.triangles.push_back({0, 1, int(mesh.positions.size())});
+  scene.meshes = {bad_index};
+  EXPECT_THROW(s_renderer->render(scene), RenderError);
+  // Normals and cut flags that do not match the vertices and triangles.
+  RenderMesh bad_normals = mesh;
+  bad_normals.normals.pop_back();
+  scene.meshes = {bad_normals};
+  EXPECT_THROW(s_renderer->render(scene), RenderError);
+  RenderMesh bad_cut = mesh;
+  bad_cut.cut.assign(3, 1);
+  scene.meshes = {bad_cut};
+  EXPECT_THROW(s_renderer->render(scene), RenderError);
+  // An empty image.
+  scene.meshes = {mesh};
+  scene.width = 0;
+  EXPECT_THROW(s_renderer->render(scene), RenderError);
+  // The renderer still works afterwards.
+  scene.width = kWidth;
+  EXPECT_EQ(s_renderer->render(scene).rgb.size(), std::size_t(3) * kWidth * kHeight);
+}
+
+}  // namespace
+}  // namespace octocut::engine

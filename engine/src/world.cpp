@@ -236,8 +236,10 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
       if (rendering && (i + 1) % scene.render.every == 0) render_frame();
       if (tty && (ms_since(last_progress) > 200.0 || i + 1 == steps)) {
         last_progress = Clock::now();
-        std::fprintf(stderr, "\r[octocut] step %ld/%ld  t = %.4f s  %.2f ms/step   ", i + 1, steps, sim.state().t,
+        std::fprintf(stderr, "\r[octocut] step %ld/%ld  t = %.4f s  %.2f ms/step", i + 1, steps, sim.state().t,
                      step_ms.back());
+        if (rendering) std::fprintf(stderr, "  frame %ld  %.1f ms/frame", frame, render_ms.back());
+        std::fprintf(stderr, "   ");
         if (i + 1 == steps) std::fprintf(stderr, "\n");
       }
     }

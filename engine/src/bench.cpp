@@ -5,7 +5,10 @@
 #include <cstdlib>
 #include <filesystem>
 #include <cstdio>
+#include <cmath>
+#include <ctime>
 #include <fstream>
+#include <numbers>
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
@@ -15,7 +18,10 @@
 #include "octocut/engine/mesh_io.hpp"
 #include "octocut/sim/material_graph.hpp"
 #include "octocut/engine/embedding_bench.hpp"
+#include "octocut/engine/frame_writer.hpp"
+#include "octocut/engine/renderer.hpp"
 #include "octocut/sim/simulator.hpp"
+#include "octocut/sim/surface.hpp"
 #include "report.hpp"
 
 namespace octocut::engine {
@@ -230,6 +236,95 @@ std::vector<BenchOutput> bench_embedding(int depth) {
   return {b};
 }
 
+// ---- render/1280x720: render and PNG encode time per frame (SPEC §7) --------------------------------------------
+
+// Renders `mesh` as tissue at 1280 x 720 (4x MSAA, a light at the lens) from 30 slightly different views and
+// PNG-encodes every frame as the frame writer does (level 1, no filter; the sub filter as a comparison). The same views with 2
+// samples and with 1 sample per pixel are timed too. Besides wall time, the process CPU time per frame (all
+// threads, llvmpipe's workers included) is reported: contention on a shared machine inflates it less.
+BenchOutput bench_render_mesh(const std::string& label, const sim::TriMesh& mesh) {
+  const int width = 1280, height = 720, frames = 30;
+  std::unique_ptr<Renderer> renderer = make_renderer();
+  RenderScene scene;
+  scene.width = width;
+  scene.height = height;
+  RenderMesh tissue;
+  for (const sim::Vec3& v : mesh.vertices) tissue.positions.push_back(v.cast<float>());
+  tissue.triangles = mesh.triangles;
+  tissue.normals = mesh_normals(tissue.positions, tissue.triangles);
+  scene.meshes.push_back(std::move(tissue));
+  const sim::Box3 box = sim::bounds(mesh);
+  const Eigen::Vector3d centre = 0.5 * (box.min + box.max);
+  const double radius = 0.5 * (box.max - box.min).norm();
+  scene.camera.target = centre;
+  scene.camera.fov_deg = 60.0;
+  scene.camera.near = 1e-3 * radius;
+  scene.camera.far = 10.0 * radius;
+  scene.camera.arthroscope = true;
+  const auto cpu_ms = [] { return 1000.0 * double(std::clock()) / CLOCKS_PER_SEC; };
+
+  // One pass over the views at `msaa` samples: wall ms per frame, CPU ms per frame (mean), and the images encoded
+  // when `encode` is set.
+  std::vector<double> encode_ms, encode_sub_ms;
+  std::size_t png_bytes = 0;
+  const auto pass = [&](int msaa, bool encode, std::vector<double>& wall, double& cpu) {
+    scene.msaa = msaa;
+    // Warm up: shader compilation, framebuffers for this sample count.
+    scene.camera.position = centre + Eigen::Vector3d(0.0, -2.0 * radius, 1.2 * radius);
+    renderer->render(scene);
+    double cpu_total = 0.0;
+    for (int f = 0; f < frames; ++f) {
+      const double angle = 0.02 * f;
+      scene.camera.position =
+          centre + Eigen::Vector3d(2.0 * radius * std::sin(angle), -2.0 * radius * std::cos(angle), 1.2 * radius);
+      const double c0 = cpu_ms();
+      auto t0 = Clock::now();
+      const Image image = renderer->render(scene);
+      wall.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+      cpu_total += cpu_ms() - c0;
+      if (!encode) continue;
+      t0 = Clock::now();
+      png_bytes = encode_png(image, 1, false).size();
+      encode_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+      t0 = Clock::now();
+      (void)encode_png(image, 1, true);
+      encode_sub_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+    }
+    cpu = cpu_total / frames;
+  };
+  std::vector<double> render_ms, msaa2_ms, msaa1_ms;
+  double render_cpu = 0.0, msaa2_cpu = 0.0, msaa1_cpu = 0.0;
+  pass(4, true, render_ms, render_cpu);
+  pass(2, false, msaa2_ms, msaa2_cpu);
+  pass(1, false, msaa1_ms, msaa1_cpu);
+
+  BenchOutput b;
+  b.name = "render/1280x720/" + label;
+  b.runs = frames;
+  b.ms = TimingSummary::of(render_ms);
+  b.params = {{"width", width}, {"height", height}, {"msaa", 4}, {"mesh", label},
+              {"vertices", mesh.num_vertices()}, {"triangles", mesh.num_triangles()},
+              {"renderer", renderer->description()}, {"png", "zlib level 1, no filter"}};
+  b.metrics = {{"render_ms", median_of(render_ms)},
+               {"render_p95_ms", TimingSummary::of(render_ms).p95},
+               {"render_cpu_ms", render_cpu},
+               {"render_msaa2_ms", median_of(msaa2_ms)},
+               {"render_msaa2_cpu_ms", msaa2_cpu},
+               {"render_msaa1_ms", median_of(msaa1_ms)},
+               {"render_msaa1_cpu_ms", msaa1_cpu},
+               {"encode_ms", median_of(encode_ms)},
+               {"encode_sub_filter_ms", median_of(encode_sub_ms)},
+               {"png_bytes", png_bytes}};
+  return b;
+}
+
+std::vector<BenchOutput> bench_render() {
+  // The shipped meniscus surfaces, in metres.
+  const MeshLoadOptions mm{0.001, true, false};
+  return {bench_render_mesh("10k", load_mesh(asset_path("meshes/meniscus_10k.ply"), mm).mesh),
+          bench_render_mesh("50k", load_mesh(asset_path("meshes/meniscus_50k.ply"), mm).mesh)};
+}
+
 struct Entry {
   std::string name;
   std::function<std::vector<BenchOutput>()> run;
@@ -245,7 +340,8 @@ std::vector<Entry> registry() {
           {"embedding/depth5", [] { return bench_embedding(5); }},
           {"embedding/depth6", [] { return bench_embedding(6); }},
           {"embedding/depth7", [] { return bench_embedding(7); }},
-          {"embedding/depth8", [] { return bench_embedding(8); }}};
+          {"embedding/depth8", [] { return bench_embedding(8); }},
+          {"render/1280x720", [] { return bench_render(); }}};
 }
 
 std::string cpu_name() {

@@ -36,6 +36,7 @@ std::string report_json(const Report& r) {
   j["sim_time_s"] = num(r.sim_time_s);
   j["wall_time_s"] = r.wall_time_s;
   j["timing_ms"] = {{"step", timing(r.step_ms)}, {"render", timing(r.render_ms)}, {"frame_write", timing(r.frame_write_ms)}};
+  j["frames"] = {{"rendered", r.frames_rendered}, {"written", r.frames}};
   j["counts"] = {{"elements", r.elements},         {"dofs", r.dofs},
                  {"hanging_slots", r.hanging_slots}, {"tets", r.tets},
                  {"surface_vertices", r.surface_vertices}, {"surface_triangles", r.surface_triangles}};

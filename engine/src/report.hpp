@@ -27,6 +27,8 @@ struct Report {
   double sim_time_s = 0.0;
   double wall_time_s = 0.0;
   TimingSummary step_ms, render_ms, frame_write_ms;
+  long frames_rendered = 0;  ///< frames the renderer drew
+  long frames = 0;           ///< frames written to frames/ (PNG)
   long elements = 0, dofs = 0, hanging_slots = 0, tets = 0, surface_vertices = 0, surface_triangles = 0;
   std::vector<ProbeResult> probes;
   bool finite = true;

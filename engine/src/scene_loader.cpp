@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -359,7 +360,44 @@ Scene to_scene(const json& document, const std::string& file) {
   }
 
   // Render and output.
-  scene.render.enabled = document["render"]["enabled"].get<bool>();
+  const json& render = document["render"];
+  RenderSettings& r = scene.render;
+  r.enabled = render["enabled"].get<bool>();
+  r.width = render["width"].get<int>();
+  r.height = render["height"].get<int>();
+  r.every = render["every"].get<int>();
+  r.msaa = render["msaa"].get<int>();
+  const json& camera = render["camera"];
+  r.camera.has_position = camera.contains("position");
+  if (r.camera.has_position) r.camera.position = to_vec3(camera["position"]);
+  r.camera.has_target = camera.contains("target");
+  if (r.camera.has_target) r.camera.target = to_vec3(camera["target"]);
+  r.camera.up = to_vec3(camera["up"]);
+  r.camera.fov_deg = camera["fov_deg"].get<double>();
+  r.camera.arthroscope = camera["arthroscope"].get<bool>();
+  r.camera.mask = camera["mask"].get<bool>();
+  r.camera.follow_tool = camera["follow_tool"].get<std::string>();
+  // The camera must have a view direction and an up that is not along it; tools do not exist yet.
+  if (r.camera.has_position && r.camera.has_target && r.camera.position == r.camera.target)
+    fail(file, "/render/camera/target", "must differ from /render/camera/position");
+  {
+    const auto& u = r.camera.up;
+    if (u[0] == 0.0 && u[1] == 0.0 && u[2] == 0.0) fail(file, "/render/camera/up", "must not be zero");
+    if (r.camera.has_position && r.camera.has_target) {
+      const std::array<double, 3> f{r.camera.target[0] - r.camera.position[0], r.camera.target[1] - r.camera.position[1],
+                                    r.camera.target[2] - r.camera.position[2]};
+      const std::array<double, 3> c{f[1] * u[2] - f[2] * u[1], f[2] * u[0] - f[0] * u[2], f[0] * u[1] - f[1] * u[0]};
+      const double fn = std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]);
+      const double un = std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+      if (std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) <= 1e-9 * fn * un)
+        fail(file, "/render/camera/up", "must not be parallel to the view direction (target - position)");
+    }
+  }
+  if (!r.camera.follow_tool.empty())
+    fail(file, "/render/camera/follow_tool", "no tool named \"" + r.camera.follow_tool + "\" (this scene has no tools)");
+  r.overlays.octree = render["overlays"]["octree"].get<bool>();
+  r.overlays.dofs = render["overlays"]["dofs"].get<bool>();
+  r.overlays.hanging = render["overlays"]["hanging"].get<bool>();
   scene.output.frames = document["output"]["frames"].get<bool>();
   scene.output.surface_final = document["output"]["surface_final"].get<bool>();
   scene.output.surface_every = document["output"]["surface_every"].get<int>();

@@ -211,6 +211,36 @@ Entry make_scene_schema() {
       },
       "The deformable object."));
 
+  Entry position = optional(vec3("position", std::nullopt, "Eye position, m."));
+  position.default_doc = "framed on the object";
+  Entry target = optional(vec3("target", std::nullopt, "Point looked at, m."));
+  target.default_doc = "the object's centre";
+  Entry follow_tool = string("follow_tool", "Name of a tool whose tip the camera follows (it keeps its offset); empty: a fixed camera.");
+  follow_tool.default_value = "";
+  Entry render = object(
+      "render",
+      {
+          boolean("enabled", false, "Render frames offscreen (EGL)."),
+          integer("width", 1280, closed(16, 8192), "Image width, pixels."),
+          integer("height", 720, closed(16, 8192), "Image height, pixels."),
+          integer("every", 1, closed(1, max_int), "Render one frame every N steps (frame k after step k * N)."),
+          integer("msaa", 4, closed(0, 16), "Multisample anti-aliasing samples per pixel; 0 or 1: off."),
+          object("camera",
+                 {std::move(position), std::move(target),
+                  vec3("up", std::array{0.0, 0.0, 1.0}, "Approximate up direction; not parallel to the view."),
+                  number("fov_deg", 45.0, open(0, 180), "Vertical field of view, degrees."),
+                  boolean("arthroscope", false, "Arthroscope camera: a light at the lens."),
+                  boolean("mask", false, "Black out everything outside the arthroscope's circular view."),
+                  std::move(follow_tool)},
+                 "The camera."),
+          object("overlays",
+                 {boolean("octree", false, "Draw the octree leaves as a wireframe (deformed)."),
+                  boolean("dofs", false, "Draw the DOFs as points."),
+                  boolean("hanging", false, "Draw the hanging slots as points.")},
+                 "Debug overlays."),
+      },
+      "Off-screen rendering (EGL) of the deformed object; frames are written when `output.frames` is set.");
+
   return object("",
                 {
                     std::move(name),
@@ -222,7 +252,7 @@ Entry make_scene_schema() {
                                  {required(string("name", "Probe name, unique and not empty.")),
                                   required(vec3("point", std::nullopt, "Rest-space point, m."))},
                                  "Points whose displacement the report records."),
-                    object("render", {boolean("enabled", false, "Render frames offscreen (EGL).")}, "Rendering."),
+                    std::move(render),
                     object("output",
                            {boolean("frames", false, "Write the rendered frames as PNG files."),
                             boolean("surface_final", false,

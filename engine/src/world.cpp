@@ -4,18 +4,21 @@
 
 #include <algorithm>
 #include <atomic>
-#include <optional>
 #include <chrono>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 
 #include "octocut/cutting/material_mesher.hpp"
 #include "octocut/cutting/mesh_check.hpp"
+#include "octocut/engine/frame_writer.hpp"
 #include "octocut/engine/io.hpp"
 #include "octocut/engine/material_graph_cache.hpp"
 #include "octocut/engine/mesh_io.hpp"
+#include "octocut/engine/render_builder.hpp"
+#include "octocut/engine/renderer.hpp"
 #include "octocut/engine/scene_loader.hpp"
 #include "octocut/sim/embedding.hpp"
 #include "octocut/sim/parallel.hpp"
@@ -170,12 +173,6 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
   result.report_path = (out / "report.json").string();
 
   // Everything that is bad input is found before the output directory is touched.
-  if (scene.render.enabled && !options.no_render) {
-    result.exit_code = 2;
-    result.error = scene.file + ": /render/enabled: rendering was requested, but this build has no renderer yet "
-                                "(EGL rendering lands with the rendering issue); run with --no-render";
-    return result;
-  }
   std::optional<SceneObject> object;
   try {
     object = build_scene_object(scene);
@@ -195,6 +192,30 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
   Report report;
   report.scene = scene.file;
   report.name = scene.name;
+
+  // The renderer starts only when asked for and not vetoed; if EGL cannot start, the run ends with exit 2 and the
+  // EGL error, with the report written.
+  const bool rendering = scene.render.enabled && !options.no_render;
+  std::unique_ptr<Renderer> renderer;
+  if (rendering) {
+    try {
+      renderer = make_renderer();
+    } catch (const std::exception& e) {
+      result.exit_code = 2;
+      result.error = scene.file + ": /render/enabled: cannot start the renderer: " + e.what() +
+                     " (run with --no-render to skip rendering)";
+      report.status = "failed";
+      report.error = result.error;
+      try {
+        write_file_atomic(result.report_path, report_json(report));
+      } catch (const std::exception&) {
+        // The render error is the one to report.
+      }
+      return result;
+    }
+  }
+  std::vector<double> render_ms;
+  std::unique_ptr<FrameWriter> writer;
   const auto wall0 = Clock::now();
   std::vector<double> step_ms;
   g_interrupted = false;
@@ -233,7 +254,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
     if (embedding.num_fallback() > 0)
       report.warnings.push_back(std::to_string(embedding.num_fallback()) +
                                 " surface vertices lie outside every leaf and are bound to the nearest one");
-    std::vector<sim::Vec3> deformed;
+    std::vector<sim::Vec3> deformed, deformed_normals;
     auto write_surface = [&](const fs::path& path) {
       embedding.deformed_positions(sim.state().x, deformed, surface_exec);
       write_file_atomic(path, encode_ply_binary(sim::TriMesh{deformed, surface.triangles}));
@@ -243,6 +264,48 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
     if (scene.output.surface_every > 0) fs::create_directories(out / "surfaces");
     if (scene.output.frames && options.no_render)
       report.warnings.push_back("/output/frames: --no-render given, no frames written");
+    if (scene.output.frames && !scene.render.enabled)
+      report.warnings.push_back("/output/frames: render.enabled is false, no frames written");
+
+    // Rendering: the tissue surface bound to the octree once, a frame every `every` steps from the rest state on.
+    EmbeddedSurface tissue;
+    Camera camera;
+    std::vector<sim::Vec3> slots;
+    long frame = 0;
+    const auto render_frame = [&] {
+      const auto t0 = Clock::now();
+      RenderScene rs;
+      rs.width = scene.render.width;
+      rs.height = scene.render.height;
+      rs.msaa = scene.render.msaa;
+      rs.camera = camera;
+      m.dofs().prolong(sim.state().x, slots);
+      if (scene.object.surface_is_box) {
+        rs.meshes.push_back(tissue_mesh(m, tissue, slots));
+      } else {
+        // The mesh surface S through its Z-curve embedding, normals from the deformed positions.
+        embedding.deformed_positions(sim.state().x, deformed, surface_exec);
+        embedding.deformed_normals(deformed, deformed_normals, surface_exec);
+        rs.meshes.push_back(tissue_mesh(deformed, deformed_normals, surface.triangles));
+      }
+      add_overlays(rs, scene.render.overlays, m, slots, sim.state().x);
+      Image image = renderer->render(rs);
+      render_ms.push_back(ms_since(t0));
+      if (writer) writer->push(frame, std::move(image));
+      ++frame;
+    };
+    if (rendering) {
+      // A box primitive's 12 triangles would shade flat under deformation: draw it as a finer grid of its faces.
+      if (scene.object.surface_is_box) tissue = embed_surface(m, box_surface(box3(scene.object.surface_box), 32));
+      camera = make_camera(scene.render.camera, sim::bounds(surface));
+      if (scene.output.frames) {
+        const fs::path frames_dir = out / "frames";
+        fs::create_directories(frames_dir, ec);
+        if (ec) throw std::runtime_error(frames_dir.string() + ": cannot create the frames directory: " + ec.message());
+        writer = std::make_unique<FrameWriter>(frames_dir, 4);
+      }
+      render_frame();
+    }
 
     // Timeline: fixed steps of dt up to the duration.
     const long steps = step_count(scene);
@@ -259,10 +322,13 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
         std::snprintf(name, sizeof(name), "surface_%06ld.ply", i + 1);
         write_surface(out / "surfaces" / name);
       }
+      if (rendering && (i + 1) % scene.render.every == 0) render_frame();
       if (tty && (ms_since(last_progress) > 200.0 || i + 1 == steps)) {
         last_progress = Clock::now();
-        std::fprintf(stderr, "\r[octocut] step %ld/%ld  t = %.4f s  %.2f ms/step   ", i + 1, steps, sim.state().t,
+        std::fprintf(stderr, "\r[octocut] step %ld/%ld  t = %.4f s  %.2f ms/step", i + 1, steps, sim.state().t,
                      step_ms.back());
+        if (rendering) std::fprintf(stderr, "  frame %ld  %.1f ms/frame", frame, render_ms.back());
+        std::fprintf(stderr, "   ");
         if (i + 1 == steps) std::fprintf(stderr, "\n");
       }
     }
@@ -294,6 +360,8 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
       report.warnings.push_back(std::to_string(st.newton_unconverged) + " static solves stopped unconverged");
     if (!finite) throw std::runtime_error("the state is not finite");
     if (scene.output.surface_final) write_surface(out / "surface_final.ply");
+    // Every queued frame is on disk before the run counts as done.
+    if (writer) writer->finish();
   } catch (const std::exception& e) {
     report.status = "failed";
     report.error = e.what();
@@ -303,6 +371,19 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
   std::signal(SIGINT, old_int);
   std::signal(SIGTERM, old_term);
 
+  // A failed run still keeps every frame written before the failure.
+  if (writer) {
+    try {
+      writer->finish();
+    } catch (const std::exception&) {
+      // Already reported through the run's error.
+    }
+    report.frame_write_ms = TimingSummary::of(writer->write_ms());
+    report.frames = writer->written();
+    writer.reset();
+  }
+  report.render_ms = TimingSummary::of(render_ms);
+  report.frames_rendered = long(render_ms.size());
   report.step_ms = TimingSummary::of(step_ms);
   report.wall_time_s = ms_since(wall0) / 1000.0;
   try {

@@ -1,5 +1,5 @@
 // `octocut run` end to end: the shipped cantilever against beam theory, bit-identical reports, a run stopped
-// part-way still writes a failed report, rendering without a renderer is bad input, usage errors exit 2.
+// part-way still writes a failed report, usage errors exit 2. Rendering runs are tested in tests/render/.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -122,18 +122,6 @@ TEST_F(CliRunTest, InterruptedRunWritesAFailedReport) {
   int files = 0;
   for (const auto& e : fs::directory_iterator(out)) files += e.is_regular_file() ? 1 : 0;
   EXPECT_EQ(files, 1);
-}
-
-TEST_F(CliRunTest, RenderingWithoutARendererIsBadInputUnlessNoRender) {
-  const fs::path scene = write("render.json", kCube);
-  const CommandResult r = run_octocut("run '" + scene.string() + "' --quiet --set /render/enabled=true --out '" +
-                                      (m_dir / "r").string() + "'");
-  EXPECT_EQ(r.exit_code, 2);
-  EXPECT_NE(r.output.find("/render/enabled"), std::string::npos) << r.output;
-  EXPECT_FALSE(fs::exists(m_dir / "r/report.json"));
-  const CommandResult ok = run_octocut("run '" + scene.string() + "' --quiet --no-render --set /render/enabled=true "
-                                       "--set /duration=0.002 --out '" + (m_dir / "n").string() + "'");
-  EXPECT_EQ(ok.exit_code, 0) << ok.output;
 }
 
 TEST_F(CliRunTest, ProbeOutsideTheMaterialIsBadInput) {

@@ -84,9 +84,35 @@ struct Probe {
   std::array<double, 3> point{};  ///< rest-space point, m (3)
 };
 
+/// The render camera (`render/camera`).
+struct CameraSettings {
+  bool has_position = false;               ///< false: framed on the object
+  std::array<double, 3> position{};        ///< eye, m
+  bool has_target = false;                 ///< false: the object's centre
+  std::array<double, 3> target{};          ///< point looked at, m
+  std::array<double, 3> up{0.0, 0.0, 1.0}; ///< approximate up direction
+  double fov_deg = 45.0;                   ///< vertical field of view, degrees
+  bool arthroscope = false;                ///< a light at the lens
+  bool mask = false;                       ///< circular arthroscope mask
+  std::string follow_tool;                 ///< name of the tool the camera follows; empty: fixed
+};
+
+/// Debug overlays drawn over the tissue (`render/overlays`).
+struct OverlaySettings {
+  bool octree = false;   ///< wireframe of the octree leaves
+  bool dofs = false;     ///< the DOFs as points
+  bool hanging = false;  ///< the hanging slots as points
+};
+
 /// Off-screen rendering (`render`).
 struct RenderSettings {
   bool enabled = false;
+  int width = 1280;   ///< pixels
+  int height = 720;   ///< pixels
+  int every = 1;      ///< render one frame every N steps
+  int msaa = 4;       ///< samples per pixel; 0 or 1: off
+  CameraSettings camera;
+  OverlaySettings overlays;
 };
 
 /// Files written besides the report (`output`).

@@ -1,0 +1,688 @@
+// The EGL renderer (SPEC §6): headless EGL (device platform first, Mesa surfaceless as the fallback), an OpenGL 3.3
+// core context current with no surface, a multisampled FBO, Blinn-Phong shading, overlays and the arthroscope mask,
+// read back into an RGB8 image. Function loading through libepoxy.
+#include <epoxy/egl.h>
+#include <epoxy/gl.h>
+
+#include <dlfcn.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "octocut/engine/renderer.hpp"
+
+namespace octocut::engine {
+
+namespace {
+
+// ---- EGL errors -----------------------------------------------------------------------------------------------------
+
+/// "EGL_BAD_ACCESS (0x3002)" for an EGL error code.
+std::string egl_error_text(EGLint code) {
+  const char* name = "unknown EGL error";
+  switch (code) {
+    case EGL_SUCCESS: name = "EGL_SUCCESS"; break;
+    case EGL_NOT_INITIALIZED: name = "EGL_NOT_INITIALIZED"; break;
+    case EGL_BAD_ACCESS: name = "EGL_BAD_ACCESS"; break;
+    case EGL_BAD_ALLOC: name = "EGL_BAD_ALLOC"; break;
+    case EGL_BAD_ATTRIBUTE: name = "EGL_BAD_ATTRIBUTE"; break;
+    case EGL_BAD_CONFIG: name = "EGL_BAD_CONFIG"; break;
+    case EGL_BAD_CONTEXT: name = "EGL_BAD_CONTEXT"; break;
+    case EGL_BAD_CURRENT_SURFACE: name = "EGL_BAD_CURRENT_SURFACE"; break;
+    case EGL_BAD_DISPLAY: name = "EGL_BAD_DISPLAY"; break;
+    case EGL_BAD_MATCH: name = "EGL_BAD_MATCH"; break;
+    case EGL_BAD_NATIVE_PIXMAP: name = "EGL_BAD_NATIVE_PIXMAP"; break;
+    case EGL_BAD_NATIVE_WINDOW: name = "EGL_BAD_NATIVE_WINDOW"; break;
+    case EGL_BAD_PARAMETER: name = "EGL_BAD_PARAMETER"; break;
+    case EGL_BAD_SURFACE: name = "EGL_BAD_SURFACE"; break;
+    case EGL_CONTEXT_LOST: name = "EGL_CONTEXT_LOST"; break;
+    default: break;
+  }
+  char code_text[16];
+  std::snprintf(code_text, sizeof code_text, "0x%04X", unsigned(code));
+  return std::string(name) + " (" + code_text + ")";
+}
+
+/// Throws RenderError "EGL: <what>: <eglGetError()>".
+[[noreturn]] void egl_fail(const std::string& what) {
+  throw RenderError("EGL: " + what + ": " + egl_error_text(eglGetError()));
+}
+
+/// "GL_INVALID_OPERATION (0x0502)" for a GL error code.
+std::string gl_error_text(GLenum code) {
+  const char* name = "unknown GL error";
+  switch (code) {
+    case GL_INVALID_ENUM: name = "GL_INVALID_ENUM"; break;
+    case GL_INVALID_VALUE: name = "GL_INVALID_VALUE"; break;
+    case GL_INVALID_OPERATION: name = "GL_INVALID_OPERATION"; break;
+    case GL_INVALID_FRAMEBUFFER_OPERATION: name = "GL_INVALID_FRAMEBUFFER_OPERATION"; break;
+    case GL_OUT_OF_MEMORY: name = "GL_OUT_OF_MEMORY"; break;
+    default: break;
+  }
+  char code_text[16];
+  std::snprintf(code_text, sizeof code_text, "0x%04X", unsigned(code));
+  return std::string(name) + " (" + code_text + ")";
+}
+
+/// Throws RenderError when GL has recorded an error.
+void gl_check(const char* where) {
+  const GLenum code = glGetError();
+  if (code != GL_NO_ERROR) throw RenderError(std::string("OpenGL: ") + where + ": " + gl_error_text(code));
+}
+
+// ---- RAII for the display and the context ---------------------------------------------------------------------------
+
+/// An initialised EGL display, terminated on destruction.
+class EglDisplay {
+ public:
+  EglDisplay() = default;
+  explicit EglDisplay(EGLDisplay display) : m_display(display) {}
+  ~EglDisplay() {
+    if (m_display != EGL_NO_DISPLAY) eglTerminate(m_display);
+  }
+  EglDisplay(EglDisplay&& other) noexcept : m_display(other.m_display) { other.m_display = EGL_NO_DISPLAY; }
+  EglDisplay& operator=(EglDisplay&& other) noexcept {
+    std::swap(m_display, other.m_display);
+    return *this;
+  }
+  [[nodiscard]] EGLDisplay get() const { return m_display; }
+
+ private:
+  EGLDisplay m_display = EGL_NO_DISPLAY;
+};
+
+/// An EGL context, released and destroyed on destruction (before its display is terminated).
+class EglContext {
+ public:
+  EglContext() = default;
+  EglContext(EGLDisplay display, EGLContext context) : m_display(display), m_context(context) {}
+  ~EglContext() {
+    if (m_context != EGL_NO_CONTEXT) {
+      eglMakeCurrent(m_display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
+      eglDestroyContext(m_display, m_context);
+    }
+  }
+  EglContext(const EglContext&) = delete;
+  EglContext& operator=(const EglContext&) = delete;
+  [[nodiscard]] EGLContext get() const { return m_context; }
+
+ private:
+  EGLDisplay m_display = EGL_NO_DISPLAY;
+  EGLContext m_context = EGL_NO_CONTEXT;
+};
+
+/// Initialises `display`; an empty EglDisplay on failure (eglGetError() then says why).
+EglDisplay initialise(EGLDisplay display) {
+  EGLint major = 0, minor = 0;
+  if (display == EGL_NO_DISPLAY || !eglInitialize(display, &major, &minor)) return EglDisplay();
+  return EglDisplay(display);
+}
+
+/// The first display that initialises: the device platform (all devices, or the one `OCTOCUT_EGL_DEVICE` names),
+/// then Mesa's surfaceless platform. `platform` receives a description.
+EglDisplay open_display(std::string& platform) {
+  // Test hook: behave as if no platform had a display.
+  if (const char* force = std::getenv("OCTOCUT_EGL_FORCE_FAIL"); force != nullptr && std::strcmp(force, "1") == 0)
+    throw RenderError("EGL: no display could be initialised (forced by OCTOCUT_EGL_FORCE_FAIL=1): " +
+                      egl_error_text(EGL_NOT_INITIALIZED));
+
+  // libepoxy aborts the process when it cannot load libEGL: check that it can first.
+  if (void* library = dlopen("libEGL.so.1", RTLD_LAZY | RTLD_LOCAL); library == nullptr) {
+    const char* reason = dlerror();
+    throw RenderError(std::string("EGL: cannot load libEGL.so.1: ") + (reason ? reason : "unknown reason") + ": " +
+                      egl_error_text(EGL_NOT_INITIALIZED));
+  } else {
+    dlclose(library);
+  }
+
+  // A missing libEGL client extension query means no usable EGL at all.
+  const char* client_extensions = eglQueryString(EGL_NO_DISPLAY, EGL_EXTENSIONS);
+  if (client_extensions == nullptr) egl_fail("no EGL client extensions (EGL_EXT_client_extensions missing)");
+  const std::string extensions = client_extensions;
+  const auto has = [&](const char* name) {
+    const std::string padded = " " + extensions + " ";
+    return padded.find(std::string(" ") + name + " ") != std::string::npos;
+  };
+
+  // EGL devices: the one chosen by the environment, or the first that initialises.
+  const char* chosen = std::getenv("OCTOCUT_EGL_DEVICE");
+  std::string tried;  // what was attempted, for the error message
+  if (has("EGL_EXT_platform_device") && has("EGL_EXT_device_enumeration")) {
+    EGLDeviceEXT devices[32];
+    EGLint count = 0;
+    if (!eglQueryDevicesEXT(32, devices, &count)) count = 0;
+    if (chosen != nullptr && *chosen != '\0') {
+      char* end = nullptr;
+      const long index = std::strtol(chosen, &end, 10);
+      if (*end != '\0' || index < 0 || index >= count)
+        throw RenderError("EGL: OCTOCUT_EGL_DEVICE=" + std::string(chosen) + " names no device; " +
+                          std::to_string(count) + " EGL device(s) found");
+      EglDisplay display = initialise(eglGetPlatformDisplayEXT(EGL_PLATFORM_DEVICE_EXT, devices[index], nullptr));
+      if (display.get() == EGL_NO_DISPLAY) egl_fail("cannot initialise EGL device " + std::to_string(index));
+      platform = "EGL device " + std::to_string(index);
+      return display;
+    }
+    tried = std::to_string(count) + " EGL device(s) tried";
+    for (EGLint i = 0; i < count; ++i) {
+      EglDisplay display = initialise(eglGetPlatformDisplayEXT(EGL_PLATFORM_DEVICE_EXT, devices[i], nullptr));
+      if (display.get() != EGL_NO_DISPLAY) {
+        platform = "EGL device " + std::to_string(i);
+        return display;
+      }
+    }
+  } else {
+    tried = "no EGL_EXT_platform_device";
+  }
+  if (!has("EGL_EXT_platform_device") && chosen != nullptr && *chosen != '\0') {
+    throw RenderError("EGL: OCTOCUT_EGL_DEVICE is set but EGL_EXT_platform_device is not available: " +
+                      egl_error_text(eglGetError()));
+  }
+
+  // Fallback: Mesa's surfaceless platform.
+  tried += has("EGL_MESA_platform_surfaceless") ? ", the surfaceless platform tried" : ", no EGL_MESA_platform_surfaceless";
+  if (has("EGL_MESA_platform_surfaceless")) {
+    EglDisplay display = initialise(eglGetPlatformDisplayEXT(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr));
+    if (display.get() != EGL_NO_DISPLAY) {
+      platform = "Mesa surfaceless";
+      return display;
+    }
+  }
+  egl_fail("no EGL device or surfaceless display could be initialised (" + tried + ")");
+}
+
+// ---- shaders --------------------------------------------------------------------------------------------------------
+
+constexpr const char* kMeshVertex = R"(#version 330 core
+layout(location = 0) in vec3 a_position;
+layout(location = 1) in vec3 a_normal;
+uniform mat4 u_model;
+uniform mat4 u_view_projection;
+uniform mat3 u_normal_matrix;
+out vec3 v_world;
+out vec3 v_normal;
+void main() {
+  vec4 world = u_model * vec4(a_position, 1.0);
+  v_world = world.xyz;
+  v_normal = u_normal_matrix * a_normal;
+  gl_Position = u_view_projection * world;
+}
+)";
+
+constexpr const char* kMeshFragment = R"(#version 330 core
+in vec3 v_world;
+in vec3 v_normal;
+uniform vec3 u_eye;
+uniform vec3 u_base;
+uniform vec3 u_cut_color;
+uniform float u_ambient;
+uniform float u_specular;
+uniform float u_shininess;
+uniform int u_light_count;
+uniform vec3 u_light_position[4];
+uniform vec3 u_light_color[4];
+uniform int u_has_cut;
+uniform samplerBuffer u_cut;
+out vec4 o_color;
+void main() {
+  vec3 n = normalize(v_normal);
+  if (!gl_FrontFacing) n = -n;
+  vec3 v = normalize(u_eye - v_world);
+  vec3 base = u_base;
+  if (u_has_cut != 0 && texelFetch(u_cut, gl_PrimitiveID).r > 0.0) base = u_cut_color;
+  vec3 color = u_ambient * base;
+  for (int i = 0; i < u_light_count; ++i) {
+    vec3 l = normalize(u_light_position[i] - v_world);
+    vec3 h = normalize(l + v);
+    float diffuse = max(dot(n, l), 0.0);
+    float specular = diffuse > 0.0 ? pow(max(dot(n, h), 0.0), u_shininess) : 0.0;
+    color += u_light_color[i] * (diffuse * base + u_specular * specular * vec3(1.0));
+  }
+  o_color = vec4(clamp(color, 0.0, 1.0), 1.0);
+}
+)";
+
+// Tissue: the same Blinn-Phong model evaluated at the vertices (Gouraud), the fragment stage only picks the base
+// colour (cut or not) and combines. llvmpipe shades every sample of a multisampled pixel, so a cheap fragment stage
+// matters on large tissue areas at 4x MSAA; dense tissue meshes show no visible difference from per-fragment
+// lighting.
+constexpr const char* kVertexLitVertex = R"(#version 330 core
+layout(location = 0) in vec3 a_position;
+layout(location = 1) in vec3 a_normal;
+uniform mat4 u_model;
+uniform mat4 u_view_projection;
+uniform mat3 u_normal_matrix;
+uniform vec3 u_eye;
+uniform float u_ambient;
+uniform float u_specular;
+uniform float u_shininess;
+uniform int u_light_count;
+uniform vec3 u_light_position[4];
+uniform vec3 u_light_color[4];
+out vec3 v_diffuse;
+out vec3 v_specular;
+void main() {
+  vec4 world = u_model * vec4(a_position, 1.0);
+  vec3 n = normalize(u_normal_matrix * a_normal);
+  vec3 v = normalize(u_eye - world.xyz);
+  if (dot(n, v) < 0.0) n = -n;
+  vec3 diffuse = vec3(u_ambient);
+  vec3 specular = vec3(0.0);
+  for (int i = 0; i < u_light_count; ++i) {
+    vec3 l = normalize(u_light_position[i] - world.xyz);
+    vec3 h = normalize(l + v);
+    float d = max(dot(n, l), 0.0);
+    diffuse += u_light_color[i] * d;
+    specular += u_light_color[i] * (d > 0.0 ? u_specular * pow(max(dot(n, h), 0.0), u_shininess) : 0.0);
+  }
+  v_diffuse = diffuse;
+  v_specular = specular;
+  gl_Position = u_view_projection * world;
+}
+)";
+
+constexpr const char* kVertexLitFragment = R"(#version 330 core
+in vec3 v_diffuse;
+in vec3 v_specular;
+uniform vec3 u_base;
+uniform vec3 u_cut_color;
+uniform int u_has_cut;
+uniform samplerBuffer u_cut;
+out vec4 o_color;
+void main() {
+  vec3 base = u_base;
+  if (u_has_cut != 0 && texelFetch(u_cut, gl_PrimitiveID).r > 0.0) base = u_cut_color;
+  o_color = vec4(clamp(base * v_diffuse + v_specular, 0.0, 1.0), 1.0);
+}
+)";
+
+constexpr const char* kOverlayVertex = R"(#version 330 core
+layout(location = 0) in vec3 a_position;
+uniform mat4 u_view_projection;
+uniform float u_point_size;
+void main() {
+  gl_Position = u_view_projection * vec4(a_position, 1.0);
+  gl_PointSize = u_point_size;
+}
+)";
+
+constexpr const char* kOverlayFragment = R"(#version 330 core
+uniform vec3 u_color;
+uniform int u_round;
+out vec4 o_color;
+void main() {
+  if (u_round != 0 && length(gl_PointCoord - vec2(0.5)) > 0.5) discard;
+  o_color = vec4(u_color, 1.0);
+}
+)";
+
+// A full-screen triangle from gl_VertexID that blacks out everything outside the arthroscope's circle.
+constexpr const char* kMaskVertex = R"(#version 330 core
+void main() {
+  vec2 p = vec2(float((gl_VertexID << 1) & 2), float(gl_VertexID & 2));
+  gl_Position = vec4(2.0 * p - 1.0, 0.0, 1.0);
+}
+)";
+
+constexpr const char* kMaskFragment = R"(#version 330 core
+uniform vec2 u_center;
+uniform float u_radius;
+out vec4 o_color;
+void main() {
+  if (length(gl_FragCoord.xy - u_center) <= u_radius) discard;
+  o_color = vec4(0.0, 0.0, 0.0, 1.0);
+}
+)";
+
+GLuint compile(GLenum type, const char* source, const char* name) {
+  const GLuint shader = glCreateShader(type);
+  glShaderSource(shader, 1, &source, nullptr);
+  glCompileShader(shader);
+  GLint ok = GL_FALSE;
+  glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
+  if (ok != GL_TRUE) {
+    char log[2048] = {};
+    glGetShaderInfoLog(shader, sizeof log, nullptr, log);
+    glDeleteShader(shader);
+    throw RenderError(std::string("OpenGL: cannot compile the ") + name + " shader: " + log);
+  }
+  return shader;
+}
+
+GLuint link(const char* vertex, const char* fragment, const char* name) {
+  const GLuint vs = compile(GL_VERTEX_SHADER, vertex, name);
+  const GLuint fs = compile(GL_FRAGMENT_SHADER, fragment, name);
+  const GLuint program = glCreateProgram();
+  glAttachShader(program, vs);
+  glAttachShader(program, fs);
+  glLinkProgram(program);
+  glDeleteShader(vs);
+  glDeleteShader(fs);
+  GLint ok = GL_FALSE;
+  glGetProgramiv(program, GL_LINK_STATUS, &ok);
+  if (ok != GL_TRUE) {
+    char log[2048] = {};
+    glGetProgramInfoLog(program, sizeof log, nullptr, log);
+    glDeleteProgram(program);
+    throw RenderError(std::string("OpenGL: cannot link the ") + name + " program: " + log);
+  }
+  return program;
+}
+
+/// Shading constants of one material kind.
+struct Shading {
+  Eigen::Vector3f base;
+  float specular;
+  float shininess;
+};
+
+Shading shading_of(MaterialKind kind) {
+  switch (kind) {
+    case MaterialKind::metal: return {{0.62f, 0.64f, 0.68f}, 0.9f, 80.0f};
+    case MaterialKind::bone: return {{0.88f, 0.84f, 0.72f}, 0.08f, 8.0f};
+    case MaterialKind::tissue: break;
+  }
+  return {{0.86f, 0.58f, 0.56f}, 0.25f, 24.0f};
+}
+
+const Eigen::Vector3f kCutColor(0.78f, 0.12f, 0.10f);  ///< fresh-tissue red, RGB
+constexpr float kAmbient = 0.15f;
+
+// ---- the renderer ---------------------------------------------------------------------------------------------------
+
+class EglRenderer final : public Renderer {
+ public:
+  EglRenderer() {
+    // Display, config, context: each failure carries eglGetError().
+    std::string platform;
+    m_display = open_display(platform);
+    if (!eglBindAPI(EGL_OPENGL_API)) egl_fail("eglBindAPI(EGL_OPENGL_API)");
+    const EGLint config_attributes[] = {EGL_SURFACE_TYPE, EGL_PBUFFER_BIT, EGL_RENDERABLE_TYPE, EGL_OPENGL_BIT,
+                                        EGL_NONE};
+    EGLConfig config = nullptr;
+    EGLint configs = 0;
+    if (!eglChooseConfig(m_display.get(), config_attributes, &config, 1, &configs) || configs < 1)
+      egl_fail("no EGL config with EGL_PBUFFER_BIT and EGL_OPENGL_BIT");
+    const EGLint context_attributes[] = {EGL_CONTEXT_MAJOR_VERSION, 3, EGL_CONTEXT_MINOR_VERSION, 3,
+                                         EGL_CONTEXT_OPENGL_PROFILE_MASK, EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
+                                         EGL_NONE};
+    const EGLContext context = eglCreateContext(m_display.get(), config, EGL_NO_CONTEXT, context_attributes);
+    if (context == EGL_NO_CONTEXT) egl_fail("cannot create an OpenGL 3.3 core context");
+    m_context.emplace(m_display.get(), context);
+    if (!eglMakeCurrent(m_display.get(), EGL_NO_SURFACE, EGL_NO_SURFACE, context))
+      egl_fail("cannot make the context current with no surface");
+
+    // GL objects shared by every frame.
+    m_description = platform + ": " + reinterpret_cast<const char*>(glGetString(GL_RENDERER)) + ", OpenGL " +
+                    reinterpret_cast<const char*>(glGetString(GL_VERSION));
+    m_mesh_program = link(kMeshVertex, kMeshFragment, "mesh");
+    m_tissue_program = link(kVertexLitVertex, kVertexLitFragment, "tissue");
+    m_overlay_program = link(kOverlayVertex, kOverlayFragment, "overlay");
+    m_mask_program = link(kMaskVertex, kMaskFragment, "mask");
+    glGenVertexArrays(1, &m_vao);
+    glGenBuffers(1, &m_position_buffer);
+    glGenBuffers(1, &m_normal_buffer);
+    glGenBuffers(1, &m_index_buffer);
+    glGenBuffers(1, &m_cut_buffer);
+    glGenTextures(1, &m_cut_texture);
+    gl_check("creating buffers");
+  }
+
+  ~EglRenderer() override {
+    // GL objects go before the context (the context's destructor releases it).
+    release_framebuffers();
+    glDeleteTextures(1, &m_cut_texture);
+    const GLuint buffers[] = {m_position_buffer, m_normal_buffer, m_index_buffer, m_cut_buffer};
+    glDeleteBuffers(4, buffers);
+    glDeleteVertexArrays(1, &m_vao);
+    glDeleteProgram(m_mesh_program);
+    glDeleteProgram(m_tissue_program);
+    glDeleteProgram(m_overlay_program);
+    glDeleteProgram(m_mask_program);
+  }
+
+  [[nodiscard]] std::string description() const override { return m_description; }
+
+  Image render(const RenderScene& scene) override {
+    if (scene.width <= 0 || scene.height <= 0 || scene.width > 8192 || scene.height > 8192)
+      throw RenderError("render: image size " + std::to_string(scene.width) + "x" + std::to_string(scene.height) +
+                        " outside 1..8192");
+    ensure_framebuffers(scene.width, scene.height, std::max(scene.msaa, 1));
+
+    // Camera and lights.
+    const Eigen::Matrix4f view_projection =
+        (projection_matrix(scene.camera, scene.width, scene.height) * view_matrix(scene.camera)).cast<float>();
+    const Eigen::Vector3f eye = scene.camera.position.cast<float>();
+    std::vector<RenderLight> lights;
+    if (scene.camera.arthroscope || scene.lights.empty()) lights.push_back({eye, Eigen::Vector3f::Ones()});
+    for (const RenderLight& l : scene.lights)
+      if (int(lights.size()) < kMaxLights) lights.push_back(l);
+
+    // Clear the multisampled target.
+    glBindFramebuffer(GL_FRAMEBUFFER, m_msaa_fbo);
+    glViewport(0, 0, scene.width, scene.height);
+    glClearColor(scene.background.x(), scene.background.y(), scene.background.z(), 1.0f);
+    glClearDepth(1.0);
+    glEnable(GL_DEPTH_TEST);
+    glDepthFunc(GL_LESS);
+    glCullFace(GL_BACK);
+    glFrontFace(GL_CCW);
+    glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+    glBindVertexArray(m_vao);
+
+    // Meshes.
+    for (const GLuint program : {m_mesh_program, m_tissue_program}) {
+      glUseProgram(program);
+      set_matrix4(program, "u_view_projection", view_projection);
+      glUniform3fv(uniform(program, "u_eye"), 1, eye.data());
+      glUniform3fv(uniform(program, "u_cut_color"), 1, kCutColor.data());
+      glUniform1f(uniform(program, "u_ambient"), kAmbient);
+      glUniform1i(uniform(program, "u_light_count"), int(lights.size()));
+      for (std::size_t i = 0; i < lights.size(); ++i) {
+        const std::string index = "[" + std::to_string(i) + "]";
+        glUniform3fv(uniform(program, ("u_light_position" + index).c_str()), 1, lights[i].position.data());
+        glUniform3fv(uniform(program, ("u_light_color" + index).c_str()), 1, lights[i].color.data());
+      }
+      glUniform1i(uniform(program, "u_cut"), 0);
+    }
+    // Faces are pushed back a little so that wireframe lines lying on them win the depth test.
+    glEnable(GL_POLYGON_OFFSET_FILL);
+    glPolygonOffset(1.0f, 1.0f);
+    for (const RenderMesh& mesh : scene.meshes) draw_mesh(mesh);
+    glDisable(GL_POLYGON_OFFSET_FILL);
+    glDisable(GL_CULL_FACE);
+
+    // Overlays: lines depth-tested against the meshes, points on top.
+    glUseProgram(m_overlay_program);
+    set_matrix4(m_overlay_program, "u_view_projection", view_projection);
+    glUniform1f(uniform(m_overlay_program, "u_point_size"), 1.0f);
+    glUniform1i(uniform(m_overlay_program, "u_round"), 0);
+    glDisableVertexAttribArray(1);
+    glDepthFunc(GL_LEQUAL);
+    for (const OverlayLines& lines : scene.lines) {
+      if (lines.endpoints.size() < 2) continue;
+      upload_positions(lines.endpoints);
+      glUniform3fv(uniform(m_overlay_program, "u_color"), 1, lines.color.data());
+      glDrawArrays(GL_LINES, 0, GLsizei(lines.endpoints.size() / 2 * 2));
+    }
+    glDisable(GL_DEPTH_TEST);
+    glEnable(GL_PROGRAM_POINT_SIZE);
+    glUniform1i(uniform(m_overlay_program, "u_round"), 1);
+    for (const OverlayPoints& points : scene.points) {
+      if (points.points.empty()) continue;
+      upload_positions(points.points);
+      glUniform3fv(uniform(m_overlay_program, "u_color"), 1, points.color.data());
+      glUniform1f(uniform(m_overlay_program, "u_point_size"), points.size_px);
+      glDrawArrays(GL_POINTS, 0, GLsizei(points.points.size()));
+    }
+
+    // Arthroscope mask: black outside the centred circle.
+    if (scene.camera.mask) {
+      glUseProgram(m_mask_program);
+      glUniform2f(uniform(m_mask_program, "u_center"), 0.5f * float(scene.width), 0.5f * float(scene.height));
+      glUniform1f(uniform(m_mask_program, "u_radius"), float(scene.camera.mask_radius * 0.5 * scene.height));
+      glDrawArrays(GL_TRIANGLES, 0, 3);
+    }
+    gl_check("drawing");
+
+    // Resolve the samples and read back, flipping rows so that the image starts at the top.
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, m_msaa_fbo);
+    glBindFramebuffer(GL_DRAW_FRAMEBUFFER, m_resolve_fbo);
+    glBlitFramebuffer(0, 0, scene.width, scene.height, 0, 0, scene.width, scene.height, GL_COLOR_BUFFER_BIT,
+                      GL_NEAREST);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, m_resolve_fbo);
+    glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    Image image;
+    image.width = scene.width;
+    image.height = scene.height;
+    image.rgb.resize(std::size_t(3) * scene.width * scene.height);
+    m_readback.resize(image.rgb.size());
+    glReadPixels(0, 0, scene.width, scene.height, GL_RGB, GL_UNSIGNED_BYTE, m_readback.data());
+    gl_check("reading the frame back");
+    const std::size_t row = std::size_t(3) * scene.width;
+    for (int y = 0; y < scene.height; ++y)
+      std::memcpy(image.rgb.data() + row * y, m_readback.data() + row * (scene.height - 1 - y), row);
+    return image;
+  }
+
+ private:
+  static GLint uniform(GLuint program, const char* name) { return glGetUniformLocation(program, name); }
+
+  static void set_matrix4(GLuint program, const char* name, const Eigen::Matrix4f& m) {
+    glUniformMatrix4fv(uniform(program, name), 1, GL_FALSE, m.data());  // Eigen is column-major, as GL
+  }
+
+  /// Uploads positions into attribute 0 of the bound VAO.
+  void upload_positions(const std::vector<Eigen::Vector3f>& positions) {
+    glBindBuffer(GL_ARRAY_BUFFER, m_position_buffer);
+    glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(positions.size() * sizeof(Eigen::Vector3f)), positions.data(),
+                 GL_STREAM_DRAW);
+    glEnableVertexAttribArray(0);
+    glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(Eigen::Vector3f), nullptr);
+  }
+
+  void draw_mesh(const RenderMesh& mesh) {
+    if (mesh.triangles.empty() || mesh.positions.empty()) return;
+    // Validate before GL reads anything out of bounds.
+    const std::size_t nv = mesh.positions.size();
+    if (!mesh.normals.empty() && mesh.normals.size() != nv)
+      throw RenderError("render: a mesh has " + std::to_string(mesh.normals.size()) + " normals for " +
+                        std::to_string(nv) + " vertices");
+    if (!mesh.cut.empty() && mesh.cut.size() != mesh.triangles.size())
+      throw RenderError("render: a mesh has " + std::to_string(mesh.cut.size()) + " cut flags for " +
+                        std::to_string(mesh.triangles.size()) + " triangles");
+    for (const auto& t : mesh.triangles)
+      for (const std::int32_t v : t)
+        if (v < 0 || std::size_t(v) >= nv) throw RenderError("render: a triangle index is out of range");
+
+    // Material and transform.
+    const Shading shading = shading_of(mesh.material);
+    const GLuint program = mesh.material == MaterialKind::tissue ? m_tissue_program : m_mesh_program;
+    glUseProgram(program);
+    glUniform3fv(uniform(program, "u_base"), 1, shading.base.data());
+    glUniform1f(uniform(program, "u_specular"), shading.specular);
+    glUniform1f(uniform(program, "u_shininess"), shading.shininess);
+    set_matrix4(program, "u_model", mesh.model);
+    const Eigen::Matrix3f normal_matrix = mesh.model.topLeftCorner<3, 3>().inverse().transpose();
+    glUniformMatrix3fv(uniform(program, "u_normal_matrix"), 1, GL_FALSE, normal_matrix.data());
+
+    // Vertex data.
+    upload_positions(mesh.positions);
+    const std::vector<Eigen::Vector3f> computed =
+        mesh.normals.empty() ? mesh_normals(mesh.positions, mesh.triangles) : std::vector<Eigen::Vector3f>();
+    const std::vector<Eigen::Vector3f>& normals = mesh.normals.empty() ? computed : mesh.normals;
+    glBindBuffer(GL_ARRAY_BUFFER, m_normal_buffer);
+    glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(nv * sizeof(Eigen::Vector3f)), normals.data(), GL_STREAM_DRAW);
+    glEnableVertexAttribArray(1);
+    glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, sizeof(Eigen::Vector3f), nullptr);
+    glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, m_index_buffer);
+    glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(mesh.triangles.size() * sizeof(mesh.triangles[0])),
+                 mesh.triangles.data(), GL_STREAM_DRAW);
+
+    // Per-triangle cut flags through a buffer texture indexed by gl_PrimitiveID.
+    const bool has_cut = !mesh.cut.empty();
+    glUniform1i(uniform(program, "u_has_cut"), has_cut ? 1 : 0);
+    if (has_cut) {
+      glBindBuffer(GL_TEXTURE_BUFFER, m_cut_buffer);
+      glBufferData(GL_TEXTURE_BUFFER, GLsizeiptr(mesh.cut.size()), mesh.cut.data(), GL_STREAM_DRAW);
+      glActiveTexture(GL_TEXTURE0);
+      glBindTexture(GL_TEXTURE_BUFFER, m_cut_texture);
+      glTexBuffer(GL_TEXTURE_BUFFER, GL_R8, m_cut_buffer);
+    }
+    // Closed meshes hide their back faces anyway: culling them halves llvmpipe's rasterisation work.
+    if (mesh.cull_back_faces)
+      glEnable(GL_CULL_FACE);
+    else
+      glDisable(GL_CULL_FACE);
+    glDrawElements(GL_TRIANGLES, GLsizei(3 * mesh.triangles.size()), GL_UNSIGNED_INT, nullptr);
+  }
+
+  /// (Re)creates the multisampled and the resolve framebuffers for a new size or sample count.
+  void ensure_framebuffers(int width, int height, int samples) {
+    if (width == m_width && height == m_height && samples == m_samples) return;
+    release_framebuffers();
+    GLint max_samples = 1;
+    glGetIntegerv(GL_MAX_SAMPLES, &max_samples);
+    samples = std::min(samples, int(max_samples));
+    glGenRenderbuffers(3, m_renderbuffers);
+    glGenFramebuffers(1, &m_msaa_fbo);
+    glGenFramebuffers(1, &m_resolve_fbo);
+    // Multisampled colour and depth.
+    glBindFramebuffer(GL_FRAMEBUFFER, m_msaa_fbo);
+    glBindRenderbuffer(GL_RENDERBUFFER, m_renderbuffers[0]);
+    glRenderbufferStorageMultisample(GL_RENDERBUFFER, samples > 1 ? samples : 0, GL_RGBA8, width, height);
+    glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, m_renderbuffers[0]);
+    glBindRenderbuffer(GL_RENDERBUFFER, m_renderbuffers[1]);
+    glRenderbufferStorageMultisample(GL_RENDERBUFFER, samples > 1 ? samples : 0, GL_DEPTH_COMPONENT24, width, height);
+    glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, m_renderbuffers[1]);
+    if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
+      throw RenderError("OpenGL: the multisampled framebuffer is incomplete");
+    // Single-sampled resolve target.
+    glBindFramebuffer(GL_FRAMEBUFFER, m_resolve_fbo);
+    glBindRenderbuffer(GL_RENDERBUFFER, m_renderbuffers[2]);
+    glRenderbufferStorage(GL_RENDERBUFFER, GL_RGBA8, width, height);
+    glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, m_renderbuffers[2]);
+    if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
+      throw RenderError("OpenGL: the resolve framebuffer is incomplete");
+    gl_check("creating the framebuffers");
+    m_width = width;
+    m_height = height;
+    m_samples = samples;
+  }
+
+  void release_framebuffers() {
+    if (m_msaa_fbo == 0) return;
+    glDeleteFramebuffers(1, &m_msaa_fbo);
+    glDeleteFramebuffers(1, &m_resolve_fbo);
+    glDeleteRenderbuffers(3, m_renderbuffers);
+    m_msaa_fbo = m_resolve_fbo = 0;
+    m_width = m_height = m_samples = 0;
+  }
+
+  // Declaration order matters: the context is destroyed before the display is terminated.
+  EglDisplay m_display;
+  std::optional<EglContext> m_context;
+  std::string m_description;
+  GLuint m_mesh_program = 0;    ///< per-fragment Blinn-Phong: metal and bone
+  GLuint m_tissue_program = 0;  ///< per-vertex Blinn-Phong with the per-triangle cut tint: tissue
+  GLuint m_overlay_program = 0, m_mask_program = 0;
+  GLuint m_vao = 0, m_position_buffer = 0, m_normal_buffer = 0, m_index_buffer = 0, m_cut_buffer = 0;
+  GLuint m_cut_texture = 0;
+  GLuint m_msaa_fbo = 0, m_resolve_fbo = 0;
+  GLuint m_renderbuffers[3] = {0, 0, 0};  ///< MSAA colour, MSAA depth, resolve colour
+  int m_width = 0, m_height = 0, m_samples = 0;
+  std::vector<std::uint8_t> m_readback;   ///< bottom-up rows from glReadPixels (3 * width * height)
+};
+
+}  // namespace
+
+bool renderer_available() { return true; }
+
+std::unique_ptr<Renderer> make_renderer() { return std::make_unique<EglRenderer>(); }
+
+}  // namespace octocut::engine

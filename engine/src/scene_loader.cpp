@@ -393,8 +393,36 @@ Scene to_scene(const json& document, const std::string& file) {
         fail(file, "/render/camera/up", "must not be parallel to the view direction (target - position)");
     }
   }
-  if (!r.camera.follow_tool.empty())
-    fail(file, "/render/camera/follow_tool", "no tool named \"" + r.camera.follow_tool + "\" (this scene has no tools)");
+  // Props: names unique, mesh files present, keyframe times strictly increasing.
+  std::set<std::string> prop_names;
+  for (std::size_t i = 0; i < render["props"].size(); ++i) {
+    const json& prop = render["props"][i];
+    const std::string pointer = "/render/props/" + std::to_string(i);
+    RenderProp entry;
+    entry.name = prop["name"].get<std::string>();
+    if (entry.name.empty()) fail(file, pointer + "/name", "must not be empty");
+    if (!prop_names.insert(entry.name).second) fail(file, pointer + "/name", "duplicate prop name \"" + entry.name + "\"");
+    const std::filesystem::path resolved =
+        std::filesystem::absolute(std::filesystem::path(file).parent_path() / prop["mesh"].get<std::string>())
+            .lexically_normal();
+    if (!std::filesystem::is_regular_file(resolved)) fail(file, pointer + "/mesh", "file not found: " + resolved.string());
+    entry.mesh_path = resolved.string();
+    entry.scale = prop["scale"].get<double>();
+    entry.material = prop["material"].get<std::string>();
+    for (std::size_t k = 0; k < prop["keyframes"].size(); ++k) {
+      const json& keyframe = prop["keyframes"][k];
+      PropKeyframe frame{keyframe["t"].get<double>(), to_vec3(keyframe["position"]), to_vec3(keyframe["rotation_deg"])};
+      if (k > 0 && !(frame.t > entry.keyframes.back().t))
+        fail(file, pointer + "/keyframes/" + std::to_string(k) + "/t",
+             "must be > the previous keyframe's t (" + format_number(entry.keyframes.back().t) + "), got " +
+                 format_number(frame.t));
+      entry.keyframes.push_back(frame);
+    }
+    r.props.push_back(std::move(entry));
+  }
+  // Until tools land (cutting issue), the camera can follow a prop.
+  if (!r.camera.follow_tool.empty() && !prop_names.count(r.camera.follow_tool))
+    fail(file, "/render/camera/follow_tool", "no tool or prop named \"" + r.camera.follow_tool + "\"");
   r.overlays.octree = render["overlays"]["octree"].get<bool>();
   r.overlays.dofs = render["overlays"]["dofs"].get<bool>();
   r.overlays.hanging = render["overlays"]["hanging"].get<bool>();

@@ -215,7 +215,8 @@ Entry make_scene_schema() {
   position.default_doc = "framed on the object";
   Entry target = optional(vec3("target", std::nullopt, "Point looked at, m."));
   target.default_doc = "the object's centre";
-  Entry follow_tool = string("follow_tool", "Name of a tool whose tip the camera follows (it keeps its offset); empty: a fixed camera.");
+  Entry follow_tool = string("follow_tool", "Name of a tool (or render prop) whose tip, the origin of its frame, the camera "
+                                            "follows, keeping its offset; empty: a fixed camera.");
   follow_tool.default_value = "";
   Entry render = object(
       "render",
@@ -233,6 +234,21 @@ Entry make_scene_schema() {
                   boolean("mask", false, "Black out everything outside the arthroscope's circular view."),
                   std::move(follow_tool)},
                  "The camera."),
+          object_array(
+              "props",
+              {required(string("name", "Prop name, unique and not empty.")),
+               required(string("mesh", "Closed triangle mesh file, path relative to the scene file.")),
+               number("scale", 1.0, greater_than(0), "Factor from mesh coordinates to metres (0.001 for mm)."),
+               choice("material", {"bone", "metal", "tissue"}, "bone", "Shading: bone, metal or tissue."),
+               object_array("keyframes",
+                            {required(number("t", std::nullopt, at_least(0),
+                                             "Time, s; strictly increasing along the list.")),
+                             vec3("position", std::array{0.0, 0.0, 0.0}, "Position of the prop frame's origin, m."),
+                             vec3("rotation_deg", std::array{0.0, 0.0, 0.0},
+                                  "XYZ Euler angles of the prop frame, degrees.")},
+                            "Pose over time: position linear, rotation spherical-linear between keyframes, held "
+                            "before the first and after the last; none: the mesh as it is in its file.")},
+              "Render-only meshes (the knee context, an instrument); they take no part in the simulation."),
           object("overlays",
                  {boolean("octree", false, "Draw the octree leaves as a wireframe (deformed)."),
                   boolean("dofs", false, "Draw the DOFs as points."),

@@ -181,6 +181,20 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
     result.error = e.what();
     return result;
   }
+  // Render props are loaded with the scene's other inputs: a bad prop mesh is bad input.
+  std::vector<RenderMesh> props;
+  if (scene.render.enabled && !options.no_render) {
+    for (std::size_t i = 0; i < scene.render.props.size(); ++i) {
+      const RenderProp& p = scene.render.props[i];
+      try {
+        props.push_back(prop_mesh(load_mesh(p.mesh_path, MeshLoadOptions{p.scale, true, false}).mesh, p.material));
+      } catch (const MeshError& e) {
+        result.exit_code = 2;
+        result.error = scene.file + ": /render/props/" + std::to_string(i) + "/mesh: " + e.what();
+        return result;
+      }
+    }
+  }
   std::error_code ec;
   fs::create_directories(out, ec);
   if (ec) {
@@ -287,6 +301,17 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
         embedding.deformed_positions(sim.state().x, deformed, surface_exec);
         embedding.deformed_normals(deformed, deformed_normals, surface_exec);
         rs.meshes.push_back(tissue_mesh(deformed, deformed_normals, surface.triangles));
+      }
+      // Props at their pose now; the camera follows the one it is told to.
+      for (std::size_t i = 0; i < props.size(); ++i) {
+        const Eigen::Matrix4d pose = prop_pose(scene.render.props[i], sim.state().t);
+        RenderMesh mesh = props[i];
+        mesh.model = pose.cast<float>();
+        rs.meshes.push_back(std::move(mesh));
+        if (scene.render.props[i].name == scene.render.camera.follow_tool) {
+          follow_tool(camera, pose.topRightCorner<3, 1>());
+          rs.camera = camera;
+        }
       }
       add_overlays(rs, scene.render.overlays, m, slots, sim.state().x);
       Image image = renderer->render(rs);

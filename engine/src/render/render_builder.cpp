@@ -12,7 +12,40 @@ namespace {
 
 Eigen::Vector3f to_float(const sim::Vec3& v) { return v.cast<float>(); }
 
+// Rotation of XYZ Euler angles in degrees: first about x, then y, then z (fixed axes), as for handles.
+Eigen::Quaterniond euler_xyz(const std::array<double, 3>& deg) {
+  const double k = std::numbers::pi / 180.0;
+  return Eigen::AngleAxisd(deg[2] * k, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(deg[1] * k, Eigen::Vector3d::UnitY()) *
+         Eigen::AngleAxisd(deg[0] * k, Eigen::Vector3d::UnitX());
+}
+
 }  // namespace
+
+Eigen::Matrix4d prop_pose(const RenderProp& prop, double t) {
+  Eigen::Matrix4d pose = Eigen::Matrix4d::Identity();
+  const auto& keys = prop.keyframes;
+  if (keys.empty()) return pose;
+  // The keyframe interval holding t, and the fraction s along it; held at the ends.
+  std::size_t i = 0;
+  while (i + 1 < keys.size() && t > keys[i + 1].t) ++i;
+  const PropKeyframe& a = keys[i];
+  const PropKeyframe& b = i + 1 < keys.size() ? keys[i + 1] : keys[i];
+  const double s = (b.t > a.t) ? std::clamp((t - a.t) / (b.t - a.t), 0.0, 1.0) : 0.0;
+  const Eigen::Vector3d pa(a.position[0], a.position[1], a.position[2]), pb(b.position[0], b.position[1], b.position[2]);
+  pose.topLeftCorner<3, 3>() = euler_xyz(a.rotation_deg).slerp(s, euler_xyz(b.rotation_deg)).toRotationMatrix();
+  pose.topRightCorner<3, 1>() = (1.0 - s) * pa + s * pb;
+  return pose;
+}
+
+RenderMesh prop_mesh(const sim::TriMesh& mesh, const std::string& material) {
+  RenderMesh out;
+  out.material = material == "metal" ? MaterialKind::metal : material == "tissue" ? MaterialKind::tissue : MaterialKind::bone;
+  out.positions.reserve(mesh.vertices.size());
+  for (const sim::Vec3& p : mesh.vertices) out.positions.push_back(to_float(p));
+  out.triangles = mesh.triangles;
+  out.normals = mesh_normals(out.positions, out.triangles);
+  return out;
+}
 
 sim::TriMesh box_surface(const sim::Box3& box, int cells) {
   const sim::Vec3 size = box.max - box.min;

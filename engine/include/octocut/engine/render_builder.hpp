@@ -36,6 +36,14 @@ RenderMesh tissue_mesh(const sim::ObjectModel& model, const EmbeddedSurface& sur
 RenderMesh tissue_mesh(const std::vector<sim::Vec3>& positions, const std::vector<sim::Vec3>& normals,
                        const std::vector<std::array<std::int32_t, 3>>& triangles);
 
+/// The pose of a render prop at time t (s), as a model-to-world transform (m): the position interpolated linearly
+/// and the rotation spherically (slerp of the keyframes' XYZ Euler rotations) between keyframes, held before the
+/// first and after the last; the identity without keyframes.
+Eigen::Matrix4d prop_pose(const RenderProp& prop, double t);
+
+/// A prop's mesh in its own frame (m), shaded as `material` ("bone", "metal" or "tissue").
+RenderMesh prop_mesh(const sim::TriMesh& mesh, const std::string& material);
+
 /// The camera of the scene settings for an object with rest bounds `bounds` (m): a missing target is the centre of
 /// the bounds, a missing position looks at the target from the front-right-above so that the bounds fill the view.
 /// Near and far clip distances follow the scene's size.

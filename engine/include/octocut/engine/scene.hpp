@@ -104,6 +104,23 @@ struct OverlaySettings {
   bool hanging = false;  ///< the hanging slots as points
 };
 
+/// One keyframe of a render prop's pose.
+struct PropKeyframe {
+  double t = 0.0;                        ///< time, s
+  std::array<double, 3> position{};      ///< where the prop's origin is, m (3)
+  std::array<double, 3> rotation_deg{};  ///< XYZ Euler angles of the prop frame, degrees (3)
+};
+
+/// A render-only mesh (`render/props[]`): the knee context, or an instrument shown before tools cut. It takes no
+/// part in the simulation.
+struct RenderProp {
+  std::string name;
+  std::string mesh_path;                ///< absolute path (resolved against the scene file)
+  double scale = 1.0;                   ///< multiplies mesh coordinates to get metres
+  std::string material = "bone";        ///< "bone" | "metal" | "tissue"
+  std::vector<PropKeyframe> keyframes;  ///< sorted by t; none: the identity pose
+};
+
 /// Off-screen rendering (`render`).
 struct RenderSettings {
   bool enabled = false;
@@ -113,6 +130,7 @@ struct RenderSettings {
   int msaa = 4;       ///< samples per pixel; 0 or 1: off
   CameraSettings camera;
   OverlaySettings overlays;
+  std::vector<RenderProp> props;  ///< render-only meshes
 };
 
 /// Files written besides the report (`output`).

@@ -178,7 +178,7 @@ TEST_F(RenderCliTest, RenderKeysAreValidatedWithPointers) {
   check("/render/every=0", "/render/every: must be >= 1, got 0");
   check("/render/msaa=64", "/render/msaa: must be <= 16, got 64");
   check("/render/camera/fov_deg=180", "/render/camera/fov_deg: must be < 180");
-  check("/render/camera/follow_tool=punch", "/render/camera/follow_tool: no tool named \"punch\"");
+  check("/render/camera/follow_tool=punch", "/render/camera/follow_tool: no tool or prop named \"punch\"");
   check("/render/camera/up=[0,0,0]", "/render/camera/up: must not be zero");
   check("/render/overlays/wireframe=true", "/render/overlays/wireframe: unknown key");
   const CommandResult ok = run_octocut("validate " + scene);
@@ -240,6 +240,72 @@ TEST(RenderBuilder, DefaultCameraFramesTheObject) {
     EXPECT_GT(p.z(), 0.0);
     EXPECT_LT(p.z(), 1.0);
   }
+}
+
+}  // namespace
+}  // namespace octocut::engine
+
+namespace octocut::engine {
+namespace {
+
+// A closed tetrahedron in mm as OBJ: vertices at the origin and on the three axes (1 cm), outward oriented.
+const char* kTetObj = "v 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+
+TEST(PropPose, HeldAtTheEndsLinearPositionSlerpRotation) {
+  using Eigen::Vector3d;
+  RenderProp prop;
+  const Eigen::Matrix4d identity = Eigen::Matrix4d::Identity();
+  EXPECT_TRUE(prop_pose(prop, 0.3).isApprox(identity));
+  prop.keyframes = {{1.0, {0.0, 0.0, 0.0}, {0.0, 0.0, 0.0}}, {3.0, {0.02, -0.04, 0.06}, {0.0, 0.0, 90.0}}};
+  // Before the first keyframe and after the last: held.
+  EXPECT_TRUE(prop_pose(prop, 0.0).isApprox(identity));
+  const Eigen::Matrix4d end = prop_pose(prop, 5.0);
+  const Eigen::Matrix3d r_end = end.block(0, 0, 3, 3);
+  const Vector3d p_end = end.block(0, 3, 3, 1);
+  EXPECT_TRUE(p_end.isApprox(Vector3d(0.02, -0.04, 0.06)));
+  EXPECT_NEAR((r_end * Vector3d::UnitX() - Vector3d::UnitY()).norm(), 0.0, 1e-12);
+  // Halfway: the midpoint, and half the rotation (45 degrees about z).
+  const Eigen::Matrix4d mid = prop_pose(prop, 2.0);
+  const Eigen::Matrix3d r_mid = mid.block(0, 0, 3, 3);
+  const Vector3d p_mid = mid.block(0, 3, 3, 1);
+  EXPECT_TRUE(p_mid.isApprox(Vector3d(0.01, -0.02, 0.03)));
+  const double c = std::sqrt(0.5);
+  EXPECT_NEAR((r_mid * Vector3d::UnitX() - Vector3d(c, c, 0.0)).norm(), 0.0, 1e-12);
+  EXPECT_NEAR((r_mid.transpose() * r_mid - Eigen::Matrix3d::Identity()).norm(), 0.0, 1e-12);
+  EXPECT_EQ(mid(3, 3), 1.0);
+  EXPECT_EQ(mid(3, 0), 0.0);
+}
+
+TEST_F(RenderCliTest, PropsAreDrawnAndValidated) {
+  std::ofstream(m_dir / "tet.obj") << kTetObj;
+  const std::string prop =
+      R"(--set '/render/props=[{"name": "tool", "mesh": "tet.obj", "scale": 0.0005, "material": "metal",)"
+      R"( "keyframes": [{"t": 0, "position": [0.012, 0.0, 0.004]}, {"t": 0.006, "position": [0.012, 0.004, 0.004]}]}]')";
+  // With the prop the frames differ from those without it, and the moving prop changes them over time.
+  ASSERT_EQ(run("plain").exit_code, 0);
+  const CommandResult r = run("prop", prop);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::string f0 = read_file(m_dir / "prop/frames/frame_000000.png");
+  EXPECT_NE(f0, read_file(m_dir / "plain/frames/frame_000000.png"));
+  EXPECT_NE(read_file(m_dir / "prop/frames/frame_000003.png"), read_file(m_dir / "plain/frames/frame_000003.png"));
+  // The camera may follow a prop.
+  EXPECT_EQ(run("follow", prop + " --set /render/camera/follow_tool=tool").exit_code, 0);
+  EXPECT_NE(read_file(m_dir / "follow/frames/frame_000003.png"), read_file(m_dir / "prop/frames/frame_000003.png"));
+
+  // A missing prop mesh, unsorted keyframes and an open prop mesh are bad input naming the prop's pointer.
+  CommandResult bad = run("missing", R"(--set '/render/props=[{"name": "a", "mesh": "nope.obj"}]')");
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.output.find("/render/props/0/mesh: file not found"), std::string::npos) << bad.output;
+  bad = run("unsorted", R"(--set '/render/props=[{"name": "a", "mesh": "tet.obj", "keyframes": [{"t": 1}, {"t": 0.5}]}]')");
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.output.find("/render/props/0/keyframes/1/t"), std::string::npos) << bad.output;
+  std::ofstream(m_dir / "open.obj") << "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+  bad = run("open", R"(--set '/render/props=[{"name": "a", "mesh": "open.obj"}]')");
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.output.find("/render/props/0/mesh: "), std::string::npos) << bad.output;
+  EXPECT_NE(bad.output.find("open.obj"), std::string::npos) << bad.output;
+  // --no-render never loads the props.
+  EXPECT_EQ(run("norender", R"(--no-render --set '/render/props=[{"name": "a", "mesh": "open.obj"}]')").exit_code, 0);
 }
 
 }  // namespace

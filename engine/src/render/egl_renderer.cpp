@@ -582,7 +582,8 @@ class EglRenderer final : public Renderer {
 
     // Material and transform.
     const Shading shading = shading_of(mesh.material);
-    const GLuint program = mesh.material == MaterialKind::tissue ? m_tissue_program : m_mesh_program;
+    // Tissue and bone are lit per vertex (dense, dull surfaces); metal keeps per-fragment highlights.
+    const GLuint program = mesh.material == MaterialKind::metal ? m_mesh_program : m_tissue_program;
     glUseProgram(program);
     glUniform3fv(uniform(program, "u_base"), 1, shading.base.data());
     glUniform1f(uniform(program, "u_specular"), shading.specular);
@@ -668,8 +669,8 @@ class EglRenderer final : public Renderer {
   EglDisplay m_display;
   std::optional<EglContext> m_context;
   std::string m_description;
-  GLuint m_mesh_program = 0;    ///< per-fragment Blinn-Phong: metal and bone
-  GLuint m_tissue_program = 0;  ///< per-vertex Blinn-Phong with the per-triangle cut tint: tissue
+  GLuint m_mesh_program = 0;    ///< per-fragment Blinn-Phong: metal
+  GLuint m_tissue_program = 0;  ///< per-vertex Blinn-Phong with the per-triangle cut tint: tissue and bone
   GLuint m_overlay_program = 0, m_mask_program = 0;
   GLuint m_vao = 0, m_position_buffer = 0, m_normal_buffer = 0, m_index_buffer = 0, m_cut_buffer = 0;
   GLuint m_cut_texture = 0;

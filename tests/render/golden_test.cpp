@@ -197,6 +197,27 @@ TEST_F(GoldenTest, ShadedSphere) {
   EXPECT_GT(centre[0], centre[2]);
 }
 
+TEST_F(GoldenTest, CullingBackFacesOnTheCpuChangesNoPixel) {
+  // Closed meshes drop their back faces before upload; drawing every face (no culling at all) must give the same image,
+  // since the depth test hides the back faces anyway, except along silhouettes, where multisampled coverage of the
+  // back faces differs. A wrongly culled front face would leave a hole of many pixels. The moved and rotated tool
+  // checks the eye's transform into model space.
+  RenderScene culled = base_scene();
+  culled.meshes.push_back(sphere({0, 0, 0}, 1.0f, 48, 24, MaterialKind::tissue));
+  RenderMesh tool = cylinder(0.2f, -0.5f, 1.5f, 24);
+  tool.material = MaterialKind::metal;
+  tool.model.topLeftCorner<3, 3>() = Eigen::AngleAxisf(0.7f, Eigen::Vector3f(1, 1, 0).normalized()).toRotationMatrix();
+  tool.model.topRightCorner<3, 1>() = Eigen::Vector3f(0.9f, -1.2f, 0.3f);
+  culled.meshes.push_back(tool);
+  RenderScene all = culled;
+  for (RenderMesh& m : all.meshes) m.cull_back_faces = false;
+  const Image a = s_renderer->render(culled), b = s_renderer->render(all);
+  ASSERT_EQ(a.rgb.size(), b.rgb.size());
+  long differing = 0;
+  for (std::size_t i = 0; i < a.rgb.size(); ++i) differing += std::abs(int(a.rgb[i]) - int(b.rgb[i])) > 2 ? 1 : 0;
+  EXPECT_LE(double(differing) / double(a.rgb.size()), 0.005) << differing << " channel values differ";
+}
+
 TEST_F(GoldenTest, TissueWithCutFacesAMetalToolAndBone) {
   RenderScene scene = base_scene();
   RenderMesh tissue = box({-1.0f, -0.6f, -0.5f}, {1.0f, 0.6f, 0.3f});

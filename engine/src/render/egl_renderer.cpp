@@ -458,6 +458,7 @@ class EglRenderer final : public Renderer {
     const Eigen::Matrix4f view_projection =
         (projection_matrix(scene.camera, scene.width, scene.height) * view_matrix(scene.camera)).cast<float>();
     const Eigen::Vector3f eye = scene.camera.position.cast<float>();
+    m_eye = eye;
     std::vector<RenderLight> lights;
     if (scene.camera.arthroscope || scene.lights.empty()) lights.push_back({eye, Eigen::Vector3f::Ones()});
     for (const RenderLight& l : scene.lights)
@@ -601,16 +602,39 @@ class EglRenderer final : public Renderer {
     glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(nv * sizeof(Eigen::Vector3f)), normals.data(), GL_STREAM_DRAW);
     glEnableVertexAttribArray(1);
     glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, sizeof(Eigen::Vector3f), nullptr);
+    // Closed meshes hide their back faces: they are dropped here already, on the CPU, so that llvmpipe neither shades
+    // the vertices only they use nor sets them up (its vertex stage runs on one thread). A triangle is kept when the
+    // eye is in front of its plane, with a margin that keeps edge-on triangles for GL's own culling to decide.
+    const std::vector<std::array<std::int32_t, 3>>* triangles = &mesh.triangles;
+    const std::vector<std::uint8_t>* cut = &mesh.cut;
+    if (mesh.cull_back_faces) {
+      const Eigen::Vector3f eye = (mesh.model.inverse() * m_eye.homogeneous()).head<3>();
+      m_front_triangles.clear();
+      m_front_cut.clear();
+      for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
+        const auto& t = mesh.triangles[f];
+        const Eigen::Vector3f& a = mesh.positions[std::size_t(t[0])];
+        const Eigen::Vector3f n =
+            (mesh.positions[std::size_t(t[1])] - a).cross(mesh.positions[std::size_t(t[2])] - a);
+        const Eigen::Vector3f to_face = a - eye;
+        if (n.dot(to_face) > 1e-4f * n.norm() * to_face.norm()) continue;
+        m_front_triangles.push_back(t);
+        if (!mesh.cut.empty()) m_front_cut.push_back(mesh.cut[f]);
+      }
+      triangles = &m_front_triangles;
+      cut = &m_front_cut;
+      if (triangles->empty()) return;
+    }
     glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, m_index_buffer);
-    glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(mesh.triangles.size() * sizeof(mesh.triangles[0])),
-                 mesh.triangles.data(), GL_STREAM_DRAW);
+    glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(triangles->size() * sizeof((*triangles)[0])),
+                 triangles->data(), GL_STREAM_DRAW);
 
     // Per-triangle cut flags through a buffer texture indexed by gl_PrimitiveID.
-    const bool has_cut = !mesh.cut.empty();
+    const bool has_cut = !cut->empty();
     glUniform1i(uniform(program, "u_has_cut"), has_cut ? 1 : 0);
     if (has_cut) {
       glBindBuffer(GL_TEXTURE_BUFFER, m_cut_buffer);
-      glBufferData(GL_TEXTURE_BUFFER, GLsizeiptr(mesh.cut.size()), mesh.cut.data(), GL_STREAM_DRAW);
+      glBufferData(GL_TEXTURE_BUFFER, GLsizeiptr(cut->size()), cut->data(), GL_STREAM_DRAW);
       glActiveTexture(GL_TEXTURE0);
       glBindTexture(GL_TEXTURE_BUFFER, m_cut_texture);
       glTexBuffer(GL_TEXTURE_BUFFER, GL_R8, m_cut_buffer);
@@ -620,7 +644,7 @@ class EglRenderer final : public Renderer {
       glEnable(GL_CULL_FACE);
     else
       glDisable(GL_CULL_FACE);
-    glDrawElements(GL_TRIANGLES, GLsizei(3 * mesh.triangles.size()), GL_UNSIGNED_INT, nullptr);
+    glDrawElements(GL_TRIANGLES, GLsizei(3 * triangles->size()), GL_UNSIGNED_INT, nullptr);
   }
 
   /// (Re)creates the multisampled and the resolve framebuffers for a new size or sample count.
@@ -677,6 +701,9 @@ class EglRenderer final : public Renderer {
   GLuint m_msaa_fbo = 0, m_resolve_fbo = 0;
   GLuint m_renderbuffers[3] = {0, 0, 0};  ///< MSAA colour, MSAA depth, resolve colour
   int m_width = 0, m_height = 0, m_samples = 0;
+  Eigen::Vector3f m_eye = Eigen::Vector3f::Zero();                 ///< camera position of the frame, m
+  std::vector<std::array<std::int32_t, 3>> m_front_triangles;     ///< scratch: the triangles facing the eye
+  std::vector<std::uint8_t> m_front_cut;                          ///< scratch: their cut flags
   std::vector<std::uint8_t> m_readback;   ///< bottom-up rows from glReadPixels (3 * width * height)
 };
 

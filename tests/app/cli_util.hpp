@@ -13,9 +13,10 @@ struct CommandResult {
   std::string output;
 };
 
-/// Runs `octocut <arguments>` through the shell, capturing stderr with stdout.
-inline CommandResult run_octocut(const std::string& arguments) {
-  const std::string command = std::string("'") + OCTOCUT_EXE + "' " + arguments + " 2>&1";
+/// Runs `<env> octocut <arguments>` through the shell, capturing stderr with stdout; `env` holds optional
+/// `NAME=value` assignments for the command.
+inline CommandResult run_octocut(const std::string& arguments, const std::string& env = "") {
+  const std::string command = env + " '" + std::string(OCTOCUT_EXE) + "' " + arguments + " 2>&1";
   CommandResult result;
   FILE* pipe = ::popen(command.c_str(), "r");
   if (pipe == nullptr) return result;

@@ -7,34 +7,15 @@
 
 #include "octocut/sim/embedding.hpp"
 #include "octocut/sim/surface.hpp"
+#include "../common/shapes.hpp"
 
 namespace {
 
 using namespace octocut::sim;
 
-// A closed UV ellipsoid of segments * (rings - 1) + 2 vertices, counter-clockwise seen from outside.
+// The shared procedural ellipsoid.
 TriMesh ellipsoid(const Vec3& centre, const Vec3& radii, int segments, int rings) {
-  TriMesh m;
-  m.vertices.push_back(centre + Vec3(0, 0, radii.z()));
-  for (int i = 1; i < rings; ++i) {
-    const double th = std::numbers::pi * i / rings;
-    for (int j = 0; j < segments; ++j) {
-      const double ph = 2.0 * std::numbers::pi * j / segments;
-      m.vertices.push_back(centre + Vec3(radii.x() * std::sin(th) * std::cos(ph),
-                                         radii.y() * std::sin(th) * std::sin(ph), radii.z() * std::cos(th)));
-    }
-  }
-  m.vertices.push_back(centre - Vec3(0, 0, radii.z()));
-  const int south = int(m.vertices.size()) - 1;
-  auto ring = [&](int i, int j) { return 1 + (i - 1) * segments + (j % segments); };
-  for (int j = 0; j < segments; ++j) m.triangles.push_back({0, ring(1, j), ring(1, j + 1)});
-  for (int i = 1; i + 1 < rings; ++i)
-    for (int j = 0; j < segments; ++j) {
-      m.triangles.push_back({ring(i, j), ring(i + 1, j), ring(i + 1, j + 1)});
-      m.triangles.push_back({ring(i, j), ring(i + 1, j + 1), ring(i, j + 1)});
-    }
-  for (int j = 0; j < segments; ++j) m.triangles.push_back({south, ring(rings - 1, j + 1), ring(rings - 1, j)});
-  return m;
+  return octocut::test::ellipsoid_mesh(centre, radii, segments, rings);
 }
 
 // A 14 mm box of material in a 16 mm root, 1 mm leaves (4096 elements), and a 50002-vertex ellipsoid inside it.

@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "../app/cli_util.hpp"
 #include "octocut/engine/frame_writer.hpp"
 #include "octocut/engine/io.hpp"
 #include "octocut/engine/render_builder.hpp"
@@ -23,23 +24,8 @@ namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
-struct CommandResult {
-  int exit_code = -1;  ///< -1 when the process did not exit normally (a crash)
-  std::string output;
-};
-
-/// Runs `<env> octocut <arguments>` through the shell, stderr with stdout.
-CommandResult run_octocut(const std::string& arguments, const std::string& env = "") {
-  const std::string command = env + " '" + std::string(OCTOCUT_EXE) + "' " + arguments + " 2>&1";
-  CommandResult result;
-  FILE* pipe = ::popen(command.c_str(), "r");
-  if (pipe == nullptr) return result;
-  char buffer[4096];
-  while (const std::size_t count = std::fread(buffer, 1, sizeof buffer, pipe)) result.output.append(buffer, count);
-  const int status = ::pclose(pipe);
-  if (status != -1 && WIFEXITED(status)) result.exit_code = WEXITSTATUS(status);
-  return result;
-}
+using test::CommandResult;
+using test::run_octocut;
 
 const char* kCube = R"({
   "name": "cube", "duration": 0.006,

@@ -1,41 +1,13 @@
 #pragma once
 // The embedding benchmark of paper Fig. 6 (SPEC §7 `embedding/depth<N>`, §10): after a cut-like surface edit, the
 // time to update the vertex-element correspondences with the Z-curve list against a naive octree that keeps a vertex
-// list in every node of every level. Also the procedural stand-in for the meniscus until the real mesh and its
-// material graph are wired in.
-#include <memory>
+// list in every node of every level. `octocut bench embedding` runs it on the 10k meniscus and its material graph.
 #include <vector>
 
 #include "octocut/sim/material.hpp"
 #include "octocut/sim/surface.hpp"
 
 namespace octocut::engine {
-
-/// Material that fills the axis-aligned solid ellipsoid |(p - centre) / radii| <= 1. Whether a box meets it is
-/// exact; the occupancy of a box that crosses the boundary is a 4 x 4 x 4 midpoint estimate, never below
-/// 2 * sim::kEmptyOccupancy when the box meets the interior, so that exactly the boxes that meet the material count
-/// as non-empty.
-class EllipsoidMaterial final : public sim::MaterialSource {
- public:
-  /// centre in m, radii in m (all positive).
-  EllipsoidMaterial(const sim::Vec3& centre, const sim::Vec3& radii);
-  [[nodiscard]] double occupancy(const sim::Box3& box) const override;
-  [[nodiscard]] bool face_connected(const sim::Box3& face, int axis) const override;
-  [[nodiscard]] sim::Box3 bounds() const override;
-
- private:
-  sim::Vec3 m_centre;  ///< m
-  sim::Vec3 m_radii;   ///< m
-};
-
-/// A closed UV ellipsoid (centre and radii in m), counter-clockwise seen from outside: two poles on the z axis and
-/// rings - 1 rings of `segments` vertices, i.e. segments * (rings - 1) + 2 vertices.
-sim::TriMesh ellipsoid_mesh(const sim::Vec3& centre, const sim::Vec3& radii, int segments, int rings);
-
-/// The procedural meniscus stand-in: an ellipsoid of 45 x 27 x 8 mm (in m) with 9986 vertices, and the material
-/// that fills it.
-sim::TriMesh meniscus_proxy_mesh();
-std::shared_ptr<sim::MaterialSource> meniscus_proxy_material();
 
 /// Settings of the embedding benchmark.
 struct EmbeddingBenchOptions {

@@ -1,0 +1,38 @@
+#pragma once
+// Procedural closed meshes shared by the tests and the benchmarks.
+#include <cmath>
+#include <numbers>
+
+#include "octocut/sim/surface.hpp"
+
+namespace octocut::test {
+
+/// A closed UV ellipsoid (centre and radii in m), counter-clockwise seen from outside: two poles on the z axis and
+/// rings - 1 rings of `segments` vertices, i.e. segments * (rings - 1) + 2 vertices.
+inline sim::TriMesh ellipsoid_mesh(const sim::Vec3& centre, const sim::Vec3& radii, int segments, int rings) {
+  using sim::Vec3;
+  sim::TriMesh m;
+  m.vertices.push_back(centre + Vec3(0, 0, radii.z()));
+  for (int i = 1; i < rings; ++i) {
+    const double th = std::numbers::pi * i / rings;
+    for (int j = 0; j < segments; ++j) {
+      const double ph = 2.0 * std::numbers::pi * j / segments;
+      m.vertices.push_back(centre + Vec3(radii.x() * std::sin(th) * std::cos(ph),
+                                         radii.y() * std::sin(th) * std::sin(ph), radii.z() * std::cos(th)));
+    }
+  }
+  m.vertices.push_back(centre - Vec3(0, 0, radii.z()));
+  // Caps and bands.
+  const int south = int(m.vertices.size()) - 1;
+  auto ring = [&](int i, int j) { return 1 + (i - 1) * segments + (j % segments); };
+  for (int j = 0; j < segments; ++j) m.triangles.push_back({0, ring(1, j), ring(1, j + 1)});
+  for (int i = 1; i + 1 < rings; ++i)
+    for (int j = 0; j < segments; ++j) {
+      m.triangles.push_back({ring(i, j), ring(i + 1, j), ring(i + 1, j + 1)});
+      m.triangles.push_back({ring(i, j), ring(i + 1, j + 1), ring(i, j + 1)});
+    }
+  for (int j = 0; j < segments; ++j) m.triangles.push_back({south, ring(rings - 1, j + 1), ring(rings - 1, j)});
+  return m;
+}
+
+}  // namespace octocut::test

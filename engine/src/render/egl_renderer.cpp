@@ -23,6 +23,13 @@ namespace {
 
 // ---- EGL errors -----------------------------------------------------------------------------------------------------
 
+/// "NAME (0x1234)": an error name with its code.
+std::string named_code(const char* name, unsigned code) {
+  char code_text[16];
+  std::snprintf(code_text, sizeof code_text, "0x%04X", code);
+  return std::string(name) + " (" + code_text + ")";
+}
+
 /// "EGL_BAD_ACCESS (0x3002)" for an EGL error code.
 std::string egl_error_text(EGLint code) {
   const char* name = "unknown EGL error";
@@ -44,9 +51,7 @@ std::string egl_error_text(EGLint code) {
     case EGL_CONTEXT_LOST: name = "EGL_CONTEXT_LOST"; break;
     default: break;
   }
-  char code_text[16];
-  std::snprintf(code_text, sizeof code_text, "0x%04X", unsigned(code));
-  return std::string(name) + " (" + code_text + ")";
+  return named_code(name, unsigned(code));
 }
 
 /// Throws RenderError "EGL: <what>: <eglGetError()>".
@@ -65,9 +70,7 @@ std::string gl_error_text(GLenum code) {
     case GL_OUT_OF_MEMORY: name = "GL_OUT_OF_MEMORY"; break;
     default: break;
   }
-  char code_text[16];
-  std::snprintf(code_text, sizeof code_text, "0x%04X", unsigned(code));
-  return std::string(name) + " (" + code_text + ")";
+  return named_code(name, unsigned(code));
 }
 
 /// Throws RenderError when GL has recorded an error.

@@ -36,10 +36,12 @@ int cmd_run(const std::string& scene_path, const std::vector<std::string>& sets,
 int cmd_validate(const std::string& scene_path, const std::vector<std::string>& sets) {
   const engine::Scene scene = engine::load_scene(scene_path, sets);
   const engine::SceneObject o = engine::build_scene_object(scene);
+  const std::vector<sim::TriMesh> props = engine::load_render_props(scene);
   const sim::ObjectModel& m = o.model;
   std::printf("%s: ok (%d elements, %d DOFs, %d hanging slots; surface %zu vertices, %zu triangles; %d tets)\n",
               scene_path.c_str(), m.num_elements(), m.num_dofs(), m.dofs().hanging_slots, o.surface.num_vertices(),
               o.surface.num_triangles(), o.graph ? o.graph->num_tets() : 0);
+  if (!props.empty()) std::printf("%s: %zu render props loaded\n", scene_path.c_str(), props.size());
   for (const std::string& w : o.warnings) std::printf("warning: %s\n", w.c_str());
   return 0;
 }

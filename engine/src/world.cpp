@@ -72,6 +72,19 @@ constexpr double kMaxMaterialCells = 1e6;
 
 sim::ObjectModel build_object(const Scene& scene) { return build_scene_object(scene).model; }
 
+std::vector<sim::TriMesh> load_render_props(const Scene& scene) {
+  std::vector<sim::TriMesh> meshes;
+  for (std::size_t i = 0; i < scene.render.props.size(); ++i) {
+    const RenderProp& p = scene.render.props[i];
+    try {
+      meshes.push_back(load_mesh(p.mesh_path, MeshLoadOptions{p.scale, true, false}).mesh);
+    } catch (const MeshError& e) {
+      throw SceneError(scene.file + ": /render/props/" + std::to_string(i) + "/mesh: " + e.what());
+    }
+  }
+  return meshes;
+}
+
 SceneObject build_scene_object(const Scene& scene) {
   step_count(scene);
   const ObjectSettings& o = scene.object;
@@ -184,15 +197,13 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
   // Render props are loaded with the scene's other inputs: a bad prop mesh is bad input.
   std::vector<RenderMesh> props;
   if (scene.render.enabled && !options.no_render) {
-    for (std::size_t i = 0; i < scene.render.props.size(); ++i) {
-      const RenderProp& p = scene.render.props[i];
-      try {
-        props.push_back(prop_mesh(load_mesh(p.mesh_path, MeshLoadOptions{p.scale, true, false}).mesh, p.material));
-      } catch (const MeshError& e) {
-        result.exit_code = 2;
-        result.error = scene.file + ": /render/props/" + std::to_string(i) + "/mesh: " + e.what();
-        return result;
-      }
+    try {
+      const std::vector<sim::TriMesh> meshes = load_render_props(scene);
+      for (std::size_t i = 0; i < meshes.size(); ++i) props.push_back(prop_mesh(meshes[i], scene.render.props[i].material));
+    } catch (const SceneError& e) {
+      result.exit_code = 2;
+      result.error = e.what();
+      return result;
     }
   }
   std::error_code ec;

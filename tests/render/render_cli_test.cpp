@@ -290,6 +290,10 @@ TEST_F(RenderCliTest, PropsAreDrawnAndValidated) {
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_NE(bad.output.find("/render/props/0/mesh: "), std::string::npos) << bad.output;
   EXPECT_NE(bad.output.find("open.obj"), std::string::npos) << bad.output;
+  // validate loads the prop meshes too.
+  const CommandResult v = run_octocut("validate '" + m_scene.string() + R"(' --set '/render/props=[{"name": "a", "mesh": "open.obj"}]')");
+  EXPECT_EQ(v.exit_code, 2);
+  EXPECT_NE(v.output.find("/render/props/0/mesh: "), std::string::npos) << v.output;
   // --no-render never loads the props.
   EXPECT_EQ(run("norender", R"(--no-render --set '/render/props=[{"name": "a", "mesh": "open.obj"}]')").exit_code, 0);
 }

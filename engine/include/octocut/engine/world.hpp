@@ -33,6 +33,10 @@ struct SceneObject {
 /// file and JSON pointer for inputs that only fail once built (a bad mesh file, a probe outside the material).
 SceneObject build_scene_object(const Scene& scene);
 
+/// Loads and validates the render props' meshes (`render.props`), scaled to metres, in order. Throws SceneError naming
+/// the file and `/render/props/<i>/mesh` for a bad mesh.
+std::vector<sim::TriMesh> load_render_props(const Scene& scene);
+
 /// The model of build_scene_object, for callers that need no surface.
 sim::ObjectModel build_object(const Scene& scene);
 

@@ -279,9 +279,14 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
     if (embedding.num_fallback() > 0)
       report.warnings.push_back(std::to_string(embedding.num_fallback()) +
                                 " surface vertices lie outside every leaf and are bound to the nearest one");
+    // The deformed surface, recomputed after every step (positions and normals in parallel over vertices).
     std::vector<sim::Vec3> deformed, deformed_normals;
-    auto write_surface = [&](const fs::path& path) {
+    const auto update_surface = [&] {
       embedding.deformed_positions(sim.state().x, deformed, surface_exec);
+      embedding.deformed_normals(deformed, deformed_normals, surface_exec);
+    };
+    update_surface();
+    auto write_surface = [&](const fs::path& path) {
       write_file_atomic(path, encode_ply_binary(sim::TriMesh{deformed, surface.triangles}));
     };
     if (scene.output.surface_final || scene.output.surface_every > 0)
@@ -308,9 +313,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
       if (scene.object.surface_is_box) {
         rs.meshes.push_back(tissue_mesh(m, tissue, slots));
       } else {
-        // The mesh surface S through its Z-curve embedding, normals from the deformed positions.
-        embedding.deformed_positions(sim.state().x, deformed, surface_exec);
-        embedding.deformed_normals(deformed, deformed_normals, surface_exec);
+        // The mesh surface S as the Z-curve embedding moved it after the last step.
         rs.meshes.push_back(tissue_mesh(deformed, deformed_normals, surface.triangles));
       }
       // Props at their pose now; the camera follows the one it is told to.
@@ -351,6 +354,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
       if (g_interrupted) throw std::runtime_error("interrupted by a signal");
       const auto t0 = Clock::now();
       sim.step();
+      update_surface();
       step_ms.push_back(ms_since(t0));
       report.steps = i + 1;
       if (scene.output.surface_every > 0 && (i + 1) % scene.output.surface_every == 0) {

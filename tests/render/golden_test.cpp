@@ -218,6 +218,36 @@ TEST_F(GoldenTest, CullingBackFacesOnTheCpuChangesNoPixel) {
   EXPECT_LE(double(differing) / double(a.rgb.size()), 0.005) << differing << " channel values differ";
 }
 
+TEST_F(GoldenTest, TheMultisampledRegionNeverClipsGeometry) {
+  // Only the screen rectangle that geometry can reach is multisampled. A sphere partly outside the frame, alone, must
+  // come out exactly as when a small second mesh in the far corner makes the rectangle cover the whole frame.
+  RenderScene alone = base_scene();
+  alone.meshes.push_back(sphere({1.2f, 0.0f, 0.3f}, 0.8f, 48, 24, MaterialKind::tissue));
+  RenderScene wide = alone;
+  RenderMesh speck = box({-2.0f, 0.0f, -1.05f}, {-1.9f, 0.1f, -0.95f});
+  wide.meshes.push_back(speck);
+  const Image a = s_renderer->render(alone), b = s_renderer->render(wide);
+  ASSERT_EQ(a.rgb.size(), b.rgb.size());
+  // Compare every pixel that the speck does not cover (its projected box, with a margin).
+  Eigen::Vector3d lo(1e9, 1e9, 0), hi(-1e9, -1e9, 0);
+  for (int k = 0; k < 8; ++k) {
+    const Eigen::Vector3d corner(k & 1 ? -1.9 : -2.0, k & 2 ? 0.1 : 0.0, k & 4 ? -0.95 : -1.05);
+    const Eigen::Vector3d p = project_to_pixel(wide.camera, kWidth, kHeight, corner);
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  long sphere_pixels = 0, differing = 0;
+  for (int y = 0; y < kHeight; ++y)
+    for (int x = 0; x < kWidth; ++x) {
+      if (x >= lo.x() - 2 && x <= hi.x() + 2 && y >= lo.y() - 2 && y <= hi.y() + 2) continue;
+      const auto pa = pixel(a, x, y), pb = pixel(b, x, y);
+      differing += pa != pb ? 1 : 0;
+      sphere_pixels += pa != std::array<int, 3>{51, 51, 51} ? 1 : 0;
+    }
+  EXPECT_EQ(differing, 0);
+  EXPECT_GT(sphere_pixels, 1000);  // the sphere is there, and large
+}
+
 TEST_F(GoldenTest, TissueWithCutFacesAMetalToolAndBone) {
   RenderScene scene = base_scene();
   RenderMesh tissue = box({-1.0f, -0.6f, -0.5f}, {1.0f, 0.6f, 0.3f});

@@ -467,10 +467,21 @@ class EglRenderer final : public Renderer {
     for (const RenderLight& l : scene.lights)
       if (int(lights.size()) < kMaxLights) lights.push_back(l);
 
-    // Clear the multisampled target.
+    // Only the pixels that geometry can reach go through the multisampled target: the rest of the frame is the
+    // background (or the arthroscope mask) and is cleared at one sample per pixel in the resolve target. On llvmpipe
+    // the multisampled clear and resolve cost in proportion to their area.
+    const Rect region = active_region(scene, view_projection);
+    glClearColor(scene.background.x(), scene.background.y(), scene.background.z(), 1.0f);
+    glBindFramebuffer(GL_FRAMEBUFFER, m_resolve_fbo);
+    glViewport(0, 0, scene.width, scene.height);
+    glDisable(GL_SCISSOR_TEST);
+    glClear(GL_COLOR_BUFFER_BIT);
+
+    // Clear the multisampled target inside the region; drawing stays inside it too.
     glBindFramebuffer(GL_FRAMEBUFFER, m_msaa_fbo);
     glViewport(0, 0, scene.width, scene.height);
-    glClearColor(scene.background.x(), scene.background.y(), scene.background.z(), 1.0f);
+    glEnable(GL_SCISSOR_TEST);
+    glScissor(region.x0, region.y0, std::max(region.x1 - region.x0, 0), std::max(region.y1 - region.y0, 0));
     glClearDepth(1.0);
     glEnable(GL_DEPTH_TEST);
     glDepthFunc(GL_LESS);
@@ -525,20 +536,29 @@ class EglRenderer final : public Renderer {
       glDrawArrays(GL_POINTS, 0, GLsizei(points.points.size()));
     }
 
-    // Arthroscope mask: black outside the centred circle.
-    if (scene.camera.mask) {
-      glUseProgram(m_mask_program);
-      glUniform2f(uniform(m_mask_program, "u_center"), 0.5f * float(scene.width), 0.5f * float(scene.height));
-      glUniform1f(uniform(m_mask_program, "u_radius"), float(scene.camera.mask_radius * 0.5 * scene.height));
-      glDrawArrays(GL_TRIANGLES, 0, 3);
-    }
     gl_check("drawing");
 
-    // Resolve the samples and read back, flipping rows so that the image starts at the top.
-    glBindFramebuffer(GL_READ_FRAMEBUFFER, m_msaa_fbo);
-    glBindFramebuffer(GL_DRAW_FRAMEBUFFER, m_resolve_fbo);
-    glBlitFramebuffer(0, 0, scene.width, scene.height, 0, 0, scene.width, scene.height, GL_COLOR_BUFFER_BIT,
-                      GL_NEAREST);
+    // Resolve the samples of the region into the single-sampled target.
+    glDisable(GL_SCISSOR_TEST);
+    if (region.x1 > region.x0 && region.y1 > region.y0) {
+      glBindFramebuffer(GL_READ_FRAMEBUFFER, m_msaa_fbo);
+      glBindFramebuffer(GL_DRAW_FRAMEBUFFER, m_resolve_fbo);
+      glBlitFramebuffer(region.x0, region.y0, region.x1, region.y1, region.x0, region.y0, region.x1, region.y1,
+                        GL_COLOR_BUFFER_BIT, GL_NEAREST);
+    }
+
+    // Arthroscope mask: black outside the centred circle (decided per pixel centre, so one sample suffices).
+    if (scene.camera.mask) {
+      glBindFramebuffer(GL_FRAMEBUFFER, m_resolve_fbo);
+      glDisable(GL_DEPTH_TEST);
+      glUseProgram(m_mask_program);
+      glUniform2f(uniform(m_mask_program, "u_center"), 0.5f * float(scene.width), 0.5f * float(scene.height));
+      glUniform1f(uniform(m_mask_program, "u_radius"), mask_radius_px(scene));
+      glDrawArrays(GL_TRIANGLES, 0, 3);
+    }
+    gl_check("resolving");
+
+    // Read back, flipping rows so that the image starts at the top.
     glBindFramebuffer(GL_READ_FRAMEBUFFER, m_resolve_fbo);
     glPixelStorei(GL_PACK_ALIGNMENT, 1);
     Image image;
@@ -559,6 +579,57 @@ class EglRenderer final : public Renderer {
 
   static void set_matrix4(GLuint program, const char* name, const Eigen::Matrix4f& m) {
     glUniformMatrix4fv(uniform(program, name), 1, GL_FALSE, m.data());  // Eigen is column-major, as GL
+  }
+
+  /// A pixel rectangle [x0, x1) x [y0, y1), GL window coordinates (origin at the bottom left).
+  struct Rect {
+    int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  };
+
+  static float mask_radius_px(const RenderScene& scene) {
+    return float(scene.camera.mask_radius * 0.5 * scene.height);
+  }
+
+  /// The pixels geometry can cover: the projections of every mesh's bounding box (a triangle's projection lies
+  /// within the projection of any box that holds it, as long as the box is in front of the eye), grown by two
+  /// pixels, within the arthroscope mask's square. The whole frame when a box reaches behind the eye or when
+  /// overlays are drawn.
+  static Rect active_region(const RenderScene& scene, const Eigen::Matrix4f& view_projection) {
+    const Rect full{0, 0, scene.width, scene.height};
+    if (!scene.lines.empty() || !scene.points.empty()) return full;
+    float x0 = 1e30f, y0 = 1e30f, x1 = -1e30f, y1 = -1e30f;
+    for (const RenderMesh& mesh : scene.meshes) {
+      if (mesh.positions.empty() || mesh.triangles.empty()) continue;
+      Eigen::Vector3f lo = mesh.positions.front(), hi = lo;
+      for (const Eigen::Vector3f& p : mesh.positions) {
+        lo = lo.cwiseMin(p);
+        hi = hi.cwiseMax(p);
+      }
+      const Eigen::Matrix4f mvp = view_projection * mesh.model;
+      for (int k = 0; k < 8; ++k) {
+        const Eigen::Vector4f corner(k & 1 ? hi.x() : lo.x(), k & 2 ? hi.y() : lo.y(), k & 4 ? hi.z() : lo.z(), 1.0f);
+        const Eigen::Vector4f clip = mvp * corner;
+        if (!(clip.w() > 1e-6f)) return full;
+        const float px = (0.5f * clip.x() / clip.w() + 0.5f) * float(scene.width);
+        const float py = (0.5f * clip.y() / clip.w() + 0.5f) * float(scene.height);
+        x0 = std::min(x0, px);
+        y0 = std::min(y0, py);
+        x1 = std::max(x1, px);
+        y1 = std::max(y1, py);
+      }
+    }
+    if (scene.camera.mask) {
+      const float r = mask_radius_px(scene), cx = 0.5f * float(scene.width), cy = 0.5f * float(scene.height);
+      x0 = std::max(x0, cx - r);
+      y0 = std::max(y0, cy - r);
+      x1 = std::min(x1, cx + r);
+      y1 = std::min(y1, cy + r);
+    }
+    const auto clamp_to = [](float v, int hi) { return int(std::clamp(v, 0.0f, float(hi))); };
+    Rect r{clamp_to(std::floor(x0) - 2.0f, scene.width), clamp_to(std::floor(y0) - 2.0f, scene.height),
+           clamp_to(std::ceil(x1) + 2.0f, scene.width), clamp_to(std::ceil(y1) + 2.0f, scene.height)};
+    if (r.x1 <= r.x0 || r.y1 <= r.y0) r = Rect{};
+    return r;
   }
 
   /// Uploads positions into attribute 0 of the bound VAO.

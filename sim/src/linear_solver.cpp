@@ -1,6 +1,8 @@
 #include "octocut/sim/linear_solver.hpp"
 
 #include <Eigen/CholmodSupport>
+
+#include "octocut/sim/parallel.hpp"
 #include <cmath>
 #include <stdexcept>
 
@@ -14,9 +16,10 @@ using Cholmod = Eigen::CholmodSupernodalLLT<SpMat, Eigen::Lower>;
 class CholmodSolver final : public LinearSolver {
  public:
   // A failed factorisation is reported through SolveInfo and counted by the caller, not printed by CHOLMOD.
-  CholmodSolver() { m_llt.cholmod().print = 0; }
+  explicit CholmodSolver(int threads) : m_threads(threads) { m_llt.cholmod().print = 0; }
   void analyze_pattern(const SpMat& A) override { m_llt.analyzePattern(A); }
   bool factorize(const SpMat& A) override {
+    const BlasThreadsScope blas(m_threads);
     m_llt.factorize(A);
     m_ok = m_llt.info() == Eigen::Success;
     m_A = &A;
@@ -36,6 +39,7 @@ class CholmodSolver final : public LinearSolver {
 
  private:
   Cholmod m_llt;
+  int m_threads = 1;  ///< BLAS threads while factorising
   const SpMat* m_A = nullptr;
   bool m_ok = false;
 };
@@ -87,6 +91,7 @@ class PcgSolver final : public LinearSolver {
 
  private:
   bool refactor() {
+    const BlasThreadsScope blas(m_opt.threads);
     m_llt.factorize(*m_A);
     m_have_factor = m_llt.info() == Eigen::Success;
     return m_have_factor;
@@ -144,7 +149,7 @@ class PcgSolver final : public LinearSolver {
 }  // namespace
 
 std::unique_ptr<LinearSolver> make_linear_solver(const std::string& name, const LinearSolverOptions& options) {
-  if (name == "cholmod") return std::make_unique<CholmodSolver>();
+  if (name == "cholmod") return std::make_unique<CholmodSolver>(options.threads);
   if (name == "pcg") return std::make_unique<PcgSolver>(options);
   throw std::invalid_argument("unknown linear solver '" + name + "'");
 }

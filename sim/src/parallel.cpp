@@ -20,10 +20,15 @@ struct Executor::Impl {
 Executor::Executor(int threads) {
   m_threads = threads > 0 ? threads : std::max(1, int(std::thread::hardware_concurrency()));
   if (m_threads > 1) m_impl = std::make_unique<Impl>(m_threads);
-  // The BLAS behind CHOLMOD (OpenBLAS on Debian) starts its own threads: cap them at the same count so the two never
-  // oversubscribe. Looked up at run time, so any BLAS works and none is linked directly.
+  // The BLAS behind CHOLMOD runs on one thread between factorisations (see set_blas_threads).
+  set_blas_threads(1);
+}
+
+void set_blas_threads(int threads) {
+  // Looked up at run time, so any BLAS works and none is linked directly.
   using SetThreads = void (*)(int);
-  if (auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) set(m_threads);
+  static const auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"));
+  if (set) set(std::max(1, threads));
 }
 
 Executor::~Executor() = default;

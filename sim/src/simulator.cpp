@@ -296,6 +296,7 @@ Simulator::Simulator(ObjectModel model, const SimulatorOptions& options)
   lo.tolerance = options.tolerance;
   lo.max_iterations = options.max_iterations;
   lo.preconditioner = options.preconditioner;
+  lo.threads = m_executor->threads();
   m_solver = make_linear_solver(options.linear_solver, lo);
   m_state = SimState::rest(m_model);
   rebuild();

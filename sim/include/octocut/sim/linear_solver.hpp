@@ -36,6 +36,7 @@ struct LinearSolverOptions {
   /// pcg: refactorise the lagged Cholesky preconditioner when a solve needs more iterations than this.
   int refactor_iterations = 8;
   std::string preconditioner = "cholesky";  ///< pcg: "cholesky" (lagged factor) | "jacobi"
+  int threads = 1;             ///< BLAS threads during numeric factorisations (one thread otherwise)
 };
 
 /// Creates "cholmod" (supernodal LL^T, exact every call) or "pcg" (warm-started conjugate gradients preconditioned

@@ -22,4 +22,26 @@ class Executor {
   int m_threads = 1;
 };
 
+/// Sets the thread count of the BLAS behind CHOLMOD (OpenBLAS on Debian, found at run time; a no-op for other BLAS).
+/// OpenBLAS's idle workers spin with sched_yield after every call that used them, burning a core that the frame
+/// writer or the renderer could use, so octocut keeps the BLAS at one thread and raises it only around numeric
+/// factorisations, where the dense supernodal kernels gain from it.
+void set_blas_threads(int threads);
+
+/// Raises the BLAS to `threads` for its lifetime, then puts it back to one thread.
+class BlasThreadsScope {
+ public:
+  explicit BlasThreadsScope(int threads) : m_raise(threads > 1) {
+    if (m_raise) set_blas_threads(threads);
+  }
+  ~BlasThreadsScope() {
+    if (m_raise) set_blas_threads(1);
+  }
+  BlasThreadsScope(const BlasThreadsScope&) = delete;
+  BlasThreadsScope& operator=(const BlasThreadsScope&) = delete;
+
+ private:
+  bool m_raise;
+};
+
 }  // namespace octocut::sim

@@ -12,7 +12,6 @@
 #include <optional>
 
 #include "octocut/cutting/material_mesher.hpp"
-#include "octocut/cutting/mesh_check.hpp"
 #include "octocut/engine/frame_writer.hpp"
 #include "octocut/engine/io.hpp"
 #include "octocut/engine/material_graph_cache.hpp"
@@ -55,7 +54,7 @@ long step_count(const Scene& scene) {
 namespace {
 
 // The closed surface of a box: 8 vertices, 12 outward-oriented triangles.
-sim::TriMesh box_surface(const sim::Box3& b) {
+sim::TriMesh closed_box_surface(const sim::Box3& b) {
   sim::TriMesh m;
   for (int k = 0; k < 8; ++k)
     m.vertices.emplace_back(k & 1 ? b.max.x() : b.min.x(), k & 2 ? b.max.y() : b.min.y(),
@@ -93,7 +92,7 @@ SceneObject build_scene_object(const Scene& scene) {
   std::shared_ptr<const sim::MaterialSource> material;
   if (o.surface_is_box) {
     material = std::make_shared<sim::BoxMaterial>(box3(o.surface_box));
-    out.surface = box_surface(box3(o.surface_box));
+    out.surface = closed_box_surface(box3(o.surface_box));
   } else {
     // The mesh: loaded, welded, validated and scaled to metres.
     try {
@@ -262,9 +261,9 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
     const sim::SurfaceCheck check = sim::check_surface(surface);
     report.surface_closed = check.closed && check.edge_manifold && check.oriented;
     report.surface_components = check.components;
-    // Exact self-intersection test; it needs a manifold mesh, which a validated or box surface is.
-    if (check.edge_manifold && check.vertex_manifold)
-      report.surface_self_intersecting = cutting::find_self_intersection(surface).has_value();
+    // S is free of self-intersections by construction: load_mesh rejects a self-intersecting mesh (CGAL, exact
+    // predicates) and a box's 12 triangles cannot intersect. Nothing changes S during a run until cuts do.
+    report.surface_self_intersecting = false;
     report.rest_volume_m3 = sim::signed_volume(surface);
     for (std::size_t h = 0; h < m.handles().size(); ++h) {
       if (std::none_of(m.dof_handle().begin(), m.dof_handle().end(), [&](int d) { return d == int(h); }))

@@ -8,6 +8,7 @@
 
 #include "assets.hpp"
 #include "octocut/engine/bench.hpp"
+#include "octocut/engine/cut_command.hpp"
 #include "octocut/engine/io.hpp"
 #include "octocut/engine/scene_loader.hpp"
 #include "octocut/engine/world.hpp"
@@ -91,6 +92,17 @@ int main(int argc, char** argv) {
   bool list = false;
   bench->add_flag("--list", list, "List the benchmark names and exit");
 
+  auto* cut = app.add_subcommand("cut", "One rest-space cut of a surface by a blade (stages 2-3, fresh M)");
+  engine::CutCommandOptions cut_opts;
+  cut->add_option("--surface", cut_opts.surface_path, "Closed surface mesh")->required();
+  cut->add_option("--blade", cut_opts.blade_path, "Closed, oriented blade mesh")->required();
+  cut->add_option("--out", cut_opts.out_path, "Output mesh, metres; the format follows the extension")->required();
+  cut->add_option("--scale", cut_opts.scale, "Multiplies both inputs' coordinates to get metres")->capture_default_str();
+  cut->add_option("--report", cut_opts.report_path, "Write the octocut.cut/1 report here");
+  cut->add_option("--cell-size", cut_opts.cell_size, "Material graph cell size, m (default 1 mm)");
+  bool no_verify = false;
+  cut->add_flag("--no-verify", no_verify, "Skip the local check of the result");
+
   auto* scene_doc = app.add_subcommand("scene-doc", "Print the scene-format documentation generated from the schema");
 
   auto* assets = app.add_subcommand("assets", "Regenerate the procedural meshes (binary PLY, millimetres)");
@@ -113,6 +125,12 @@ int main(int argc, char** argv) {
     }
     if (*bench) return cmd_bench(names, json_path, quiet);
     if (*assets) return cmd_assets(assets_dir);
+    if (*cut) {
+      cut_opts.verify = !no_verify;
+      const engine::CutCommandResult r = engine::run_cut_command(cut_opts);
+      std::fprintf(r.exit_code == 0 ? stdout : stderr, "%s%s\n", r.exit_code == 0 ? "" : "octocut: ", r.message.c_str());
+      return r.exit_code;
+    }
     if (*scene_doc) {
       std::cout << engine::scene_format_markdown();
       return 0;

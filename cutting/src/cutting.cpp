@@ -1,7 +1,417 @@
 #include "octocut/cutting/cutting.hpp"
 
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numeric>
+#include <stdexcept>
+
+#include "octocut/cutting/blade.hpp"
+#include "octocut/cutting/shape_matching.hpp"
+#include "octocut/cutting/surface_cut.hpp"
+#include "octocut/sim/dof_map.hpp"
+
 namespace octocut::cutting {
 
-bool pipeline_available() { return false; }
+bool pipeline_available() { return true; }
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+// Union-find over n elements, with path halving; the root of a set is its smallest member.
+struct UnionFind {
+  std::vector<int> parent;
+  explicit UnionFind(int n) : parent(std::size_t(n)) { std::iota(parent.begin(), parent.end(), 0); }
+  int find(int i) {
+    while (parent[std::size_t(i)] != i) {
+      parent[std::size_t(i)] = parent[std::size_t(parent[std::size_t(i)])];
+      i = parent[std::size_t(i)];
+    }
+    return i;
+  }
+  void unite(int a, int b) {
+    a = find(a);
+    b = find(b);
+    if (a == b) return;
+    if (a < b) std::swap(a, b);
+    parent[std::size_t(a)] = b;
+  }
+};
+
+bool boxes_overlap(const sim::Box3& a, const sim::Box3& b) {
+  return (a.min.array() <= b.max.array()).all() && (b.min.array() <= a.max.array()).all();
+}
+
+sim::Box3 grow(const sim::Box3& a, const sim::Box3& b) { return {a.min.cwiseMin(b.min), a.max.cwiseMax(b.max)}; }
+
+// The surface as a sequence of edits: which original vertex each current vertex is (-1 for a new one), and which
+// triangles are cut faces.
+struct SurfaceTrack {
+  sim::TriMesh mesh;
+  std::vector<int> origin;     // original vertex index of each current vertex, -1 when new (|V|)
+  std::vector<char> cut_face;  // (|F|)
+
+  // Applies one boolean result: kept vertices stay in order, inserted ones come after them.
+  void apply(SurfaceCutResult&& r) {
+    std::vector<char> gone(mesh.vertices.size(), 0);
+    for (int v : r.removed_vertices) gone[std::size_t(v)] = 1;
+    std::vector<int> next;
+    next.reserve(r.mesh.vertices.size());
+    for (std::size_t v = 0; v < origin.size(); ++v)
+      if (!gone[v]) next.push_back(origin[v]);
+    next.resize(r.mesh.vertices.size(), -1);
+    std::vector<char> flags(r.mesh.triangles.size(), 1);
+    for (std::size_t f = 0; f < flags.size(); ++f) {
+      const int o = r.triangle_origin[f];
+      flags[f] = o < 0 ? 1 : cut_face[std::size_t(o)];
+    }
+    origin = std::move(next);
+    cut_face = std::move(flags);
+    mesh = std::move(r.mesh);
+  }
+
+  // Removes the given triangles and the vertices nothing uses any more, keeping the order of the rest.
+  void remove_triangles(const std::vector<char>& drop) {
+    std::vector<std::array<int32_t, 3>> tris;
+    std::vector<char> flags;
+    std::vector<char> used(mesh.vertices.size(), 0);
+    for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
+      if (drop[f]) continue;
+      tris.push_back(mesh.triangles[f]);
+      flags.push_back(cut_face[f]);
+      for (int32_t v : mesh.triangles[f]) used[std::size_t(v)] = 1;
+    }
+    std::vector<int32_t> remap(mesh.vertices.size(), -1);
+    std::vector<sim::Vec3> verts;
+    std::vector<int> orig;
+    for (std::size_t v = 0; v < mesh.vertices.size(); ++v) {
+      if (!used[v]) continue;
+      remap[v] = int32_t(verts.size());
+      verts.push_back(mesh.vertices[v]);
+      orig.push_back(origin[v]);
+    }
+    for (auto& t : tris)
+      for (int32_t& v : t) v = remap[std::size_t(v)];
+    mesh.vertices = std::move(verts);
+    mesh.triangles = std::move(tris);
+    origin = std::move(orig);
+    cut_face = std::move(flags);
+  }
+};
+
+// Connected components of a triangle mesh's triangles (through shared vertices): component of each triangle (|F|).
+std::vector<int> triangle_components(const sim::TriMesh& mesh, int& count) {
+  UnionFind uf(int(mesh.vertices.size()));
+  for (const auto& t : mesh.triangles) {
+    uf.unite(t[0], t[1]);
+    uf.unite(t[0], t[2]);
+  }
+  std::vector<int> id(mesh.vertices.size(), -1), comp(mesh.triangles.size());
+  count = 0;
+  for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
+    const int r = uf.find(mesh.triangles[f][0]);
+    if (id[std::size_t(r)] < 0) id[std::size_t(r)] = count++;
+    comp[f] = id[std::size_t(r)];
+  }
+  return comp;
+}
+
+// A failure of one stage: the cut is skipped with this reason.
+struct StageFailure : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+}  // namespace
+
+CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceEmbedding& embedding,
+                     const CutRequest& request, const CutOptions& options) {
+  CutOutcome out;
+  const auto t_total = Clock::now();
+  auto finish = [&](std::string status, std::string reason) {
+    out.status = std::move(status);
+    out.reason = std::move(reason);
+    out.ms.total = ms_since(t_total);
+    return out;
+  };
+  if (object.removed) return finish("no-op", "the object has been cut away entirely");
+  if (!object.graph) return finish("skipped", "the object has no material graph");
+  if (!(request.inscribed_radius > 0.0) || !std::isfinite(request.inscribed_radius))
+    return finish("skipped", "the blade has no positive inscribed radius");
+
+  try {
+    const sim::ObjectModel& model = simulator.model();
+    const sim::RootGeometry& root = model.root();
+
+    // ---- 1. back_transform -------------------------------------------------------------------------------------
+    auto t0 = Clock::now();
+    const BladeVolume blade(request.blade);
+    const sim::Box3 blade_box = blade.bounds();
+    std::vector<sim::Vec3> slots;
+    model.dofs().prolong(simulator.state().x, slots);
+    std::vector<int> touched;
+    for (int e = 0; e < model.num_elements(); ++e) {
+      std::array<sim::Vec3, 8> c;
+      sim::Box3 hb{sim::Vec3::Constant(INFINITY), sim::Vec3::Constant(-INFINITY)};
+      bool finite = true;
+      for (int k = 0; k < 8; ++k) {
+        c[std::size_t(k)] = slots[8 * std::size_t(e) + std::size_t(k)];
+        finite = finite && c[std::size_t(k)].allFinite();
+        hb.min = hb.min.cwiseMin(c[std::size_t(k)]);
+        hb.max = hb.max.cwiseMax(c[std::size_t(k)]);
+      }
+      if (!finite) throw StageFailure("back_transform: the deformed state is not finite");
+      if (boxes_overlap(hb, blade_box) && blade.overlaps_hexahedron(c)) touched.push_back(e);
+    }
+    if (touched.empty()) {
+      out.ms.back_transform = ms_since(t0);
+      return finish("no-op", "the blade meets no element");
+    }
+    // Components: touched leaves that share a face through which material connects.
+    UnionFind uf(int(touched.size()));
+    for (std::size_t i = 0; i < touched.size(); ++i) {
+      for (std::size_t j = i + 1; j < touched.size(); ++j) {
+        const auto face = sim::common_face(model.tree().leaf(touched[i]), model.tree().leaf(touched[j]), root);
+        if (face && model.material().face_connected(face->first, face->second)) uf.unite(int(i), int(j));
+      }
+    }
+    std::vector<std::vector<int>> groups;
+    {
+      std::vector<int> gid(touched.size(), -1);
+      for (std::size_t i = 0; i < touched.size(); ++i) {
+        const int r = uf.find(int(i));
+        if (gid[std::size_t(r)] < 0) {
+          gid[std::size_t(r)] = int(groups.size());
+          groups.emplace_back();
+        }
+        groups[std::size_t(gid[std::size_t(r)])].push_back(touched[i]);
+      }
+    }
+    out.components = int(groups.size());
+    std::vector<sim::TriMesh> rest_blades;
+    for (const std::vector<int>& g : groups) {
+      std::vector<sim::Vec3> rest, deformed;
+      std::vector<double> weights;
+      for (int e : g) {
+        const double h = model.edge()[std::size_t(e)];
+        const double w = model.occupancy()[std::size_t(e)] * h * h * h / 8.0;
+        for (int k = 0; k < 8; ++k) {
+          rest.push_back(model.slot_rest()[8 * std::size_t(e) + std::size_t(k)]);
+          deformed.push_back(slots[8 * std::size_t(e) + std::size_t(k)]);
+          weights.push_back(w);
+        }
+      }
+      ShapeMatch match;
+      try {
+        match = shape_match(rest, deformed, weights, options.max_condition);
+      } catch (const std::invalid_argument& e) {
+        throw StageFailure(std::string("back_transform: shape matching failed: ") + e.what());
+      }
+      out.max_blend = std::max(out.max_blend, match.blend);
+      sim::TriMesh rest_blade = to_rest(match, request.blade);
+      // A back-transform that moves no vertex by more than rounding (an object at rest) is the identity: the
+      // blade is used as given, so that repeated cuts at rest meet earlier cut faces exactly, not 1e-19 m off.
+      double moved = 0.0;
+      for (std::size_t v = 0; v < rest_blade.vertices.size(); ++v)
+        moved = std::max(moved, (rest_blade.vertices[v] - request.blade.vertices[v]).cwiseAbs().maxCoeff());
+      if (moved <= 1e-12 * root.size) rest_blade = request.blade;
+      rest_blades.push_back(std::move(rest_blade));
+    }
+    out.ms.back_transform = ms_since(t0);
+
+    // ---- 2. surface ------------------------------------------------------------------------------------------------
+    t0 = Clock::now();
+    SurfaceTrack track;
+    track.mesh = object.surface;
+    track.origin.resize(track.mesh.vertices.size());
+    std::iota(track.origin.begin(), track.origin.end(), 0);
+    track.cut_face = object.cut_faces;
+    track.cut_face.resize(track.mesh.triangles.size(), 0);
+    bool surface_changed = false;
+    SurfaceCutOptions sopt;
+    sopt.verify = options.verify;
+    for (const sim::TriMesh& b : rest_blades) {
+      if (track.mesh.triangles.empty()) break;
+      SurfaceCutResult r = cut_surface(track.mesh, b, sopt);
+      if (r.status == SurfaceCutStatus::failed) throw StageFailure("surface: " + r.reason);
+      if (r.status == SurfaceCutStatus::no_op) continue;
+      out.removed_volume += r.removed_volume;
+      surface_changed = true;
+      track.apply(std::move(r));
+    }
+    out.ms.surface = ms_since(t0);
+
+    // ---- 3. material_graph -----------------------------------------------------------------------------------------
+    t0 = Clock::now();
+    std::vector<int> dead;
+    std::vector<sim::Box3> changed;
+    std::vector<BladeVolume> rest_volumes;
+    for (const sim::TriMesh& b : rest_blades) {
+      rest_volumes.emplace_back(b);
+      const std::vector<int> tets = tets_touched(*object.graph, rest_volumes.back());
+      if (tets.empty()) continue;
+      sim::Box3 region{sim::Vec3::Constant(INFINITY), sim::Vec3::Constant(-INFINITY)};
+      for (int t : tets) {
+        for (const sim::Vec3& p : object.graph->tet(t)) region = grow(region, {p, p});
+      }
+      changed.push_back(region);
+      dead.insert(dead.end(), tets.begin(), tets.end());
+    }
+    std::sort(dead.begin(), dead.end());
+    dead.erase(std::unique(dead.begin(), dead.end()), dead.end());
+    out.tets_removed = int(dead.size());
+    if (dead.empty() && !surface_changed) {
+      out.ms.material_graph = ms_since(t0);
+      return finish("no-op", "the blade removes no material");
+    }
+    std::shared_ptr<const sim::MaterialGraph> graph = dead.empty() ? object.graph : object.graph->without(dead);
+    out.ms.material_graph = ms_since(t0);
+
+    // ---- 4. refine, then node_split --------------------------------------------------------------------------------
+    t0 = Clock::now();
+    const double le = request.inscribed_radius / std::sqrt(3.0);
+    sim::ObjectModel next = model;
+    for (;;) {
+      std::vector<int> split;
+      for (int e = 0; e < next.num_elements(); ++e) {
+        const sim::Cell& c = next.tree().leaf(e);
+        if (c.level >= next.max_level() || !(next.edge()[std::size_t(e)] > le)) continue;
+        const sim::Box3 box = root.cell_box(c);
+        for (const BladeVolume& bv : rest_volumes) {
+          if (boxes_overlap(box, bv.bounds()) && bv.overlaps_box(box)) {
+            split.push_back(e);
+            break;
+          }
+        }
+      }
+      if (split.empty()) break;
+      out.leaves_refined += int(split.size());
+      next = next.refined(split);
+    }
+    out.ms.refine = ms_since(t0);
+
+    t0 = Clock::now();
+    bool all_gone = false;
+    if (!dead.empty()) {
+      if (graph->num_tets() == 0) {
+        all_gone = true;
+      } else {
+        next = next.with_material(graph, changed);
+        all_gone = next.num_elements() == 0;
+      }
+    }
+    // Loose pieces: components of elements that no handle holds. Without any handle, the largest piece counts as
+    // the body and only the others are loose.
+    std::vector<int> fragment_leaves;
+    if (!all_gone && options.fragments != FragmentPolicy::none) {
+      int count = 0;
+      const std::vector<int> comp = sim::element_components(next, count);
+      if (count > 1) {
+        const std::vector<sim::ComponentInfo> info = sim::component_info(next, comp, count);
+        const bool any_anchor = std::any_of(info.begin(), info.end(), [](const auto& c) { return c.anchored; });
+        int body = -1;
+        if (!any_anchor) {
+          body = 0;
+          for (int c = 1; c < count; ++c)
+            if (info[std::size_t(c)].volume > info[std::size_t(body)].volume) body = c;
+        }
+        std::vector<char> remove(std::size_t(count), 0);
+        for (int c = 0; c < count; ++c) {
+          const auto& ci = info[std::size_t(c)];
+          if (ci.anchored || c == body) continue;
+          if (options.fragments == FragmentPolicy::small && !(ci.volume < options.fragment_volume)) continue;
+          remove[std::size_t(c)] = 1;
+          ++out.fragments_removed;
+          out.fragment_volume += ci.volume;
+        }
+        for (int e = 0; e < next.num_elements(); ++e)
+          if (remove[std::size_t(comp[std::size_t(e)])]) fragment_leaves.push_back(e);
+      }
+    }
+    if (!fragment_leaves.empty()) {
+      // The surface parts that lie in the removed pieces go with them: a component of S whose vertices mostly lie
+      // in removed leaves.
+      std::vector<char> gone_leaf(std::size_t(next.num_elements()), 0);
+      for (int e : fragment_leaves) gone_leaf[std::size_t(e)] = 1;
+      int ncomp = 0;
+      const std::vector<int> tcomp = triangle_components(track.mesh, ncomp);
+      std::vector<int> in_gone(std::size_t(ncomp), 0), total(std::size_t(ncomp), 0);
+      std::vector<char> seen(track.mesh.vertices.size(), 0);
+      for (std::size_t f = 0; f < track.mesh.triangles.size(); ++f) {
+        for (int32_t v : track.mesh.triangles[f]) {
+          if (seen[std::size_t(v)]) continue;
+          seen[std::size_t(v)] = 1;
+          ++total[std::size_t(tcomp[f])];
+          const auto pe = next.embed(track.mesh.vertices[std::size_t(v)]);
+          if (pe && gone_leaf[std::size_t(pe->leaf)]) ++in_gone[std::size_t(tcomp[f])];
+        }
+      }
+      std::vector<char> drop(track.mesh.triangles.size(), 0);
+      bool any = false;
+      for (std::size_t f = 0; f < drop.size(); ++f) {
+        const int c = tcomp[f];
+        drop[f] = 2 * in_gone[std::size_t(c)] > total[std::size_t(c)];
+        any = any || drop[f];
+      }
+      if (any) {
+        track.remove_triangles(drop);
+        surface_changed = true;
+      }
+      if (fragment_leaves.size() == std::size_t(next.num_elements())) {
+        all_gone = true;
+      } else {
+        next = next.without_leaves(fragment_leaves);
+      }
+    }
+    out.ms.node_split = ms_since(t0);
+
+    // ---- 5. embedding, then the solver -----------------------------------------------------------------------------
+    t0 = Clock::now();
+    if (all_gone) {
+      // Nothing is left to simulate: the object is gone. The simulator keeps its last model but is no longer run.
+      object.surface = sim::TriMesh{};
+      object.cut_faces.clear();
+      object.graph = graph;
+      object.removed = true;
+      out.ms.embedding = ms_since(t0);
+      return finish("ok", "");
+    }
+    sim::SurfaceEdit edit;
+    std::size_t kept = 0;
+    while (kept < track.origin.size() && track.origin[kept] >= 0) ++kept;
+    {
+      std::vector<char> present(object.surface.vertices.size(), 0);
+      for (std::size_t v = 0; v < kept; ++v) present[std::size_t(track.origin[v])] = 1;
+      for (std::size_t v = 0; v < present.size(); ++v)
+        if (!present[v]) edit.removed_vertices.push_back(int(v));
+    }
+    edit.inserted_rest.assign(track.mesh.vertices.begin() + std::ptrdiff_t(kept), track.mesh.vertices.end());
+    edit.triangles = track.mesh.triangles;
+    embedding.update(next, edit);  // strong guarantee: unchanged when it throws
+    out.ms.embedding = ms_since(t0);
+
+    t0 = Clock::now();
+    simulator.set_model(std::move(next));
+    try {
+      simulator.refresh_solver();
+    } catch (const std::exception&) {
+      // The next step analyses the pattern again and its guards handle a solver failure.
+    }
+    out.ms.solver_update = ms_since(t0);
+
+    // Commit the object.
+    object.surface = std::move(track.mesh);
+    object.cut_faces = std::move(track.cut_face);
+    object.graph = std::move(graph);
+    return finish("ok", "");
+  } catch (const StageFailure& e) {
+    return finish("skipped", e.what());
+  } catch (const std::exception& e) {
+    return finish("skipped", std::string("unexpected error: ") + e.what());
+  }
+}
 
 }  // namespace octocut::cutting

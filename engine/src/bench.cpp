@@ -22,7 +22,10 @@
 #include "octocut/engine/renderer.hpp"
 #include "octocut/sim/simulator.hpp"
 #include "octocut/sim/surface.hpp"
+#include "octocut/engine/scene_loader.hpp"
+#include "octocut/engine/world.hpp"
 #include "report.hpp"
+#include <unistd.h>
 
 namespace octocut::engine {
 
@@ -325,6 +328,47 @@ std::vector<BenchOutput> bench_render() {
           bench_render_mesh("50k", load_mesh(asset_path("meshes/meniscus_50k.ply"), mm).mesh)};
 }
 
+// ---- cut/<scene>: the stages of every cut of a shipped cutting scene (SPEC §7) ------------------------------------
+
+// Runs the scene without rendering and with no outputs besides the report (in a temporary directory), and reports
+// the median of each stage over its ok cuts; `total` is the whole cut.
+std::vector<BenchOutput> bench_cut(const std::string& scene_name) {
+  const std::string file = asset_path("scenes/" + scene_name + ".json");
+  Scene scene = load_scene(file, {"/output/frames=false", "/output/surface_final=false"});
+  RunOptions o;
+  o.no_render = true;
+  o.out_dir = (std::filesystem::temp_directory_path() / ("octocut-bench-cut-" + std::to_string(::getpid()))).string();
+  const RunResult r = run_scene(scene, o);
+  std::error_code ec;
+  std::filesystem::remove_all(o.out_dir, ec);
+  if (r.exit_code != 0) throw std::runtime_error("cut/" + scene_name + ": the run failed: " + r.error);
+  std::array<std::vector<double>, kCutStageKeys.size()> stage;
+  int ok = 0, skipped = 0, noop = 0;
+  for (const CutSummary& c : r.cuts) {
+    if (c.status == "ok") {
+      ++ok;
+      for (std::size_t k = 0; k < kCutStageKeys.size(); ++k) stage[k].push_back(c.ms[k]);
+    } else if (c.status == "skipped") {
+      ++skipped;
+    } else {
+      ++noop;
+    }
+  }
+  BenchOutput b;
+  b.name = "cut/" + scene_name;
+  b.runs = ok;
+  b.ms = TimingSummary::of(stage.back());
+  b.params = {{"scene", "assets/scenes/" + scene_name + ".json"}, {"cuts", r.cuts.size()}, {"ok", ok},
+              {"skipped", skipped}, {"no_op", noop}, {"threads", int(std::thread::hardware_concurrency())}};
+  for (std::size_t k = 0; k < kCutStageKeys.size(); ++k)
+    b.metrics[std::string(kCutStageKeys[k]) + "_ms"] = median_of(stage[k]);
+  if (!r.cuts.empty()) {
+    b.metrics["elements_after"] = r.cuts.back().elements_after;
+    b.metrics["surface_vertices_after"] = r.cuts.back().surface_vertices_after;
+  }
+  return {b};
+}
+
 struct Entry {
   std::string name;
   std::function<std::vector<BenchOutput>()> run;
@@ -341,7 +385,11 @@ std::vector<Entry> registry() {
           {"embedding/depth6", [] { return bench_embedding(6); }},
           {"embedding/depth7", [] { return bench_embedding(7); }},
           {"embedding/depth8", [] { return bench_embedding(8); }},
-          {"render/1280x720", [] { return bench_render(); }}};
+          {"render/1280x720", [] { return bench_render(); }},
+          {"cut/meniscus_punch", [] { return bench_cut("meniscus_punch"); }},
+          {"cut/meniscus_punch_hd", [] { return bench_cut("meniscus_punch_hd"); }},
+          {"cut/adaptive_cut", [] { return bench_cut("adaptive_cut"); }},
+          {"cut/uniform_cut", [] { return bench_cut("uniform_cut"); }}};
 }
 
 std::string cpu_name() {

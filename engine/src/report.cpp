@@ -41,6 +41,24 @@ std::string report_json(const Report& r) {
                  {"hanging_slots", r.hanging_slots}, {"tets", r.tets},
                  {"surface_vertices", r.surface_vertices}, {"surface_triangles", r.surface_triangles}};
   j["cuts"] = nlohmann::ordered_json::array();
+  for (const CutSummary& c : r.cuts) {
+    ojson ms = ojson::object();
+    for (std::size_t k = 0; k < c.ms.size(); ++k) ms[std::string(kCutStageKeys[k])] = c.ms[k];
+    j["cuts"].push_back({{"t", c.t},
+                         {"tool", c.tool},
+                         {"status", c.status},
+                         {"reason", c.reason.empty() ? ojson(nullptr) : ojson(c.reason)},
+                         {"components", c.components},
+                         {"removed_volume_m3", num(c.removed_volume_m3)},
+                         {"tets_removed", c.tets_removed},
+                         {"leaves_refined", c.leaves_refined},
+                         {"fragments_removed", c.fragments_removed},
+                         {"fragment_volume_m3", num(c.fragment_volume_m3)},
+                         {"elements_after", c.elements_after},
+                         {"dofs_after", c.dofs_after},
+                         {"surface_vertices_after", c.surface_vertices_after},
+                         {"ms", ms}});
+  }
   nlohmann::ordered_json probes = nlohmann::ordered_json::object();
   for (const ProbeResult& p : r.probes) probes[p.name] = {{"rest", vec(p.rest)}, {"displacement", vec(p.displacement)}};
   j["probes"] = probes;
@@ -56,7 +74,9 @@ std::string report_json(const Report& r) {
   j["surface"] = {{"closed", r.surface_closed},
                   {"self_intersecting", r.surface_self_intersecting},
                   {"rest_volume_m3", num(r.rest_volume_m3)},
-                  {"components", r.surface_components}};
+                  {"components", r.surface_components},
+                  {"genus", r.surface_genus},
+                  {"object_removed", r.object_removed}};
   j["warnings"] = r.warnings;
   return j.dump(2) + "\n";
 }

@@ -4,6 +4,8 @@
 #include <string>
 #include <vector>
 
+#include "octocut/engine/world.hpp"
+
 namespace octocut::engine {
 
 /// Median, 95th percentile and maximum of a list of durations, ms.
@@ -30,6 +32,7 @@ struct Report {
   long frames_rendered = 0;  ///< frames the renderer drew
   long frames = 0;           ///< frames written to frames/ (PNG)
   long elements = 0, dofs = 0, hanging_slots = 0, tets = 0, surface_vertices = 0, surface_triangles = 0;
+  std::vector<CutSummary> cuts;
   std::vector<ProbeResult> probes;
   bool finite = true;
   long recoveries = 0, failed_steps = 0, solver_failures = 0, nonfinite = 0, speed_limit = 0, newton_unconverged = 0;
@@ -38,6 +41,8 @@ struct Report {
   bool surface_closed = true, surface_self_intersecting = false;
   double rest_volume_m3 = 0.0;
   long surface_components = 0;
+  long surface_genus = 0;      ///< sum over the components of S of their genus (through-holes)
+  bool object_removed = false; ///< every element was cut away
   std::vector<std::string> warnings;
 };
 

@@ -9,9 +9,13 @@
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <optional>
 
+#include "octocut/cutting/blade.hpp"
+#include "octocut/cutting/cutting.hpp"
 #include "octocut/cutting/material_mesher.hpp"
+#include "octocut/cutting/mesh_check.hpp"
 #include "octocut/engine/frame_writer.hpp"
 #include "octocut/engine/io.hpp"
 #include "octocut/engine/material_graph_cache.hpp"
@@ -19,8 +23,10 @@
 #include "octocut/engine/render_builder.hpp"
 #include "octocut/engine/renderer.hpp"
 #include "octocut/engine/scene_loader.hpp"
+#include "octocut/engine/tool.hpp"
 #include "octocut/sim/embedding.hpp"
 #include "octocut/sim/parallel.hpp"
+#include "octocut/sim/primitives.hpp"
 #include "octocut/sim/surface_check.hpp"
 #include "report.hpp"
 
@@ -35,6 +41,12 @@ sim::Box3 box3(const SceneBox& b) { return {v3(b.min), v3(b.max)}; }
 // Set by SIGINT/SIGTERM: the run stops at the next step and still writes its report.
 std::atomic<bool> g_interrupted{false};
 extern "C" void on_signal(int) { g_interrupted = true; }
+
+std::string format_seconds(double t) {
+  char b[32];
+  std::snprintf(b, sizeof(b), "%.6g s", t);
+  return b;
+}
 
 using Clock = std::chrono::steady_clock;
 double ms_since(Clock::time_point t0) {
@@ -64,6 +76,11 @@ sim::TriMesh closed_box_surface(const sim::Box3& b) {
   return m;
 }
 
+// True when some tool of the scene has cut events: only then are cut structures built.
+bool scene_cuts(const Scene& scene) {
+  return std::any_of(scene.tools.begin(), scene.tools.end(), [](const ToolSettings& t) { return !t.cuts.empty(); });
+}
+
 // Largest volume / cell_size^3 a material graph may be asked for. Mesh_3 makes about 5.4 tets per such cell (13.5k
 // tets for the meniscus at 1 mm), so this allows about a million tets: 0.82M tets took 13 s for the meniscus.
 constexpr double kMaxMaterialCells = 2e5;
@@ -90,7 +107,22 @@ SceneObject build_scene_object(const Scene& scene) {
   const ObjectSettings& o = scene.object;
   SceneObject out;
   std::shared_ptr<const sim::MaterialSource> material;
-  if (o.surface_is_box) {
+  if (o.surface_is_box && scene_cuts(scene)) {
+    // A box that tools cut: S as a welded grid and M as a Kuhn tet grid at the cell size, whose material is
+    // exactly the box.
+    const sim::Box3 box = box3(o.surface_box);
+    const double h = o.material_graph_cell_size;
+    const double cells = box.volume() / (h * h * h);
+    if (!(cells <= kMaxMaterialCells))
+      throw SceneError(scene.file + ": /object/material_graph/cell_size: " + std::to_string(h) +
+                       " m is too small for this box (volume / cell_size^3 = " + std::to_string(cells) +
+                       ", at most 2e5)");
+    out.surface = sim::closed_box_grid(box, 24);
+    const auto t0 = Clock::now();
+    out.graph = std::make_shared<sim::MaterialGraph>(sim::box_tet_mesh(box, h));
+    out.graph_ms = ms_since(t0);
+    material = out.graph;
+  } else if (o.surface_is_box) {
     material = std::make_shared<sim::BoxMaterial>(box3(o.surface_box));
     out.surface = closed_box_surface(box3(o.surface_box));
   } else {
@@ -206,6 +238,39 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
       return result;
     }
   }
+  // Tools: blades validated and measured now (a bad blade is bad input), render meshes when drawn.
+  struct ToolRuntime {
+    sim::TriMesh blade;              // tool coordinates, m
+    double inscribed_radius = 0.0;   // m
+    std::optional<RenderMesh> mesh;  // drawn as metal
+  };
+  std::vector<ToolRuntime> tools;
+  try {
+    for (std::size_t i = 0; i < scene.tools.size(); ++i) {
+      ToolRuntime tr;
+      if (!scene.tools[i].cuts.empty()) {
+        tr.blade = load_blade(scene, i);
+        tr.inscribed_radius = cutting::inscribed_radius(tr.blade);
+      }
+      if (scene.render.enabled && !options.no_render && !scene.tools[i].mesh_path.empty())
+        tr.mesh = prop_mesh(load_tool_mesh(scene, i), "metal");
+      tools.push_back(std::move(tr));
+    }
+  } catch (const SceneError& e) {
+    result.exit_code = 2;
+    result.error = e.what();
+    return result;
+  }
+  // Cut events in time order (ties: tool order, then the order in the tool's list).
+  struct CutEvent {
+    double t;
+    std::size_t tool;
+  };
+  std::vector<CutEvent> events;
+  for (std::size_t i = 0; i < scene.tools.size(); ++i)
+    for (const auto& c : scene.tools[i].cuts) events.push_back({c.t, i});
+  std::stable_sort(events.begin(), events.end(), [](const CutEvent& a, const CutEvent& b) { return a.t < b.t; });
+
   std::error_code ec;
   fs::create_directories(out, ec);
   if (ec) {
@@ -249,39 +314,59 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
 
   try {
     report.warnings = object->warnings;
-    const sim::TriMesh& surface = object->surface;
+    cutting::CutObject cut_object;
+    cut_object.surface = std::move(object->surface);
+    cut_object.cut_faces.assign(cut_object.surface.triangles.size(), 0);
+    cut_object.graph = object->graph;
+    const sim::TriMesh& surface = cut_object.surface;
+    for (std::size_t i = 0; i < scene.tools.size(); ++i)
+      if (scene.tools[i].collide)
+        report.warnings.push_back("/tools/" + std::to_string(i) +
+                                  "/collide: tool contact is not implemented yet; the tool passes through tissue");
     sim::Simulator sim(std::move(object->model), simulator_options(scene));
-    const sim::ObjectModel& m = sim.model();
-    report.elements = m.num_elements();
-    report.dofs = m.num_dofs();
-    report.hanging_slots = m.dofs().hanging_slots;
-    report.tets = object->graph ? object->graph->num_tets() : 0;
-    report.surface_vertices = long(surface.num_vertices());
-    report.surface_triangles = long(surface.num_triangles());
-    const sim::SurfaceCheck check = sim::check_surface(surface);
-    report.surface_closed = check.closed && check.edge_manifold && check.oriented;
-    report.surface_components = check.components;
-    // S is free of self-intersections by construction: load_mesh rejects a self-intersecting mesh (CGAL, exact
-    // predicates) and a box's 12 triangles cannot intersect. Nothing changes S during a run until cuts do.
-    report.surface_self_intersecting = false;
-    report.rest_volume_m3 = sim::signed_volume(surface);
-    for (std::size_t h = 0; h < m.handles().size(); ++h) {
-      if (std::none_of(m.dof_handle().begin(), m.dof_handle().end(), [&](int d) { return d == int(h); }))
+    const sim::ObjectModel& m0 = sim.model();
+    // Counts of the current revision and of S (at the start, and again at the end after the cuts).
+    const auto record_counts = [&] {
+      const sim::ObjectModel& m = sim.model();
+      report.object_removed = cut_object.removed;
+      report.elements = cut_object.removed ? 0 : m.num_elements();
+      report.dofs = cut_object.removed ? 0 : m.num_dofs();
+      report.hanging_slots = cut_object.removed ? 0 : m.dofs().hanging_slots;
+      report.tets = cut_object.graph ? cut_object.graph->num_tets() : 0;
+      report.surface_vertices = long(surface.num_vertices());
+      report.surface_triangles = long(surface.num_triangles());
+      const sim::SurfaceCheck check = sim::check_surface(surface);
+      report.surface_closed = check.closed && check.edge_manifold && check.oriented;
+      report.surface_components = check.components;
+      // Genus from the Euler characteristic of a closed surface: chi = V - E + F = 2 (components - genus).
+      if (report.surface_closed && !surface.triangles.empty()) {
+        const long chi = long(surface.num_vertices()) - long(3 * surface.num_triangles() / 2) + long(surface.num_triangles());
+        report.surface_genus = (2 * long(check.components) - chi) / 2;
+      }
+    };
+    record_counts();
+    for (std::size_t h = 0; h < m0.handles().size(); ++h) {
+      if (std::none_of(m0.dof_handle().begin(), m0.dof_handle().end(), [&](int d) { return d == int(h); }))
         report.warnings.push_back("/object/handles/" + std::to_string(h) + ": the handle holds no DOF");
     }
     if (scene.solver.mode == "static" &&
-        std::none_of(m.dof_handle().begin(), m.dof_handle().end(), [](int h) { return h >= 0; }))
+        std::none_of(m0.dof_handle().begin(), m0.dof_handle().end(), [](int h) { return h >= 0; }))
       report.warnings.push_back("/solver/mode: a static solve with no handle holding the object has no unique "
                                 "equilibrium (rigid motions are free)");
     // S embedded in T by the Z-curve list (SPEC §2.4); the deformed surface follows the DOFs.
     sim::Executor surface_exec(scene.solver.threads);
-    const sim::SurfaceEmbedding embedding(m, surface.vertices, surface.triangles);
+    sim::SurfaceEmbedding embedding(m0, surface.vertices, surface.triangles);
     if (embedding.num_fallback() > 0)
       report.warnings.push_back(std::to_string(embedding.num_fallback()) +
                                 " surface vertices lie outside every leaf and are bound to the nearest one");
     // The deformed surface, recomputed after every step (positions and normals in parallel over vertices).
     std::vector<sim::Vec3> deformed, deformed_normals;
     const auto update_surface = [&] {
+      if (cut_object.removed) {
+        deformed.clear();
+        deformed_normals.clear();
+        return;
+      }
       embedding.deformed_positions(sim.state().x, deformed, surface_exec);
       embedding.deformed_normals(deformed, deformed_normals, surface_exec);
     };
@@ -309,12 +394,17 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
       rs.height = scene.render.height;
       rs.msaa = scene.render.msaa;
       rs.camera = camera;
+      const sim::ObjectModel& m = sim.model();
       m.dofs().prolong(sim.state().x, slots);
-      if (scene.object.surface_is_box) {
+      if (cut_object.removed) {
+        // Nothing left to draw of the tissue.
+      } else if (!cut_object.graph) {
         rs.meshes.push_back(tissue_mesh(m, tissue, slots));
       } else {
-        // The mesh surface S as the Z-curve embedding moved it after the last step.
-        rs.meshes.push_back(tissue_mesh(deformed, deformed_normals, surface.triangles));
+        // The mesh surface S as the Z-curve embedding moved it after the last step, cut faces tinted.
+        RenderMesh t = tissue_mesh(deformed, deformed_normals, surface.triangles);
+        t.cut.assign(cut_object.cut_faces.begin(), cut_object.cut_faces.end());
+        rs.meshes.push_back(std::move(t));
       }
       // Props at their pose now; the camera follows the one it is told to.
       for (std::size_t i = 0; i < props.size(); ++i) {
@@ -327,7 +417,23 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
           rs.camera = camera;
         }
       }
-      add_overlays(rs, scene.render.overlays, m, slots, sim.state().x);
+      // Tools at their pose now.
+      for (std::size_t i = 0; i < tools.size(); ++i) {
+        const ToolPose pose = tool_pose(scene.tools[i], sim.state().t);
+        if (tools[i].mesh) {
+          RenderMesh mesh = *tools[i].mesh;
+          Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+          T.topLeftCorner<3, 3>() = pose.rotation;
+          T.topRightCorner<3, 1>() = pose.position;
+          mesh.model = T.cast<float>();
+          rs.meshes.push_back(std::move(mesh));
+        }
+        if (scene.tools[i].name == scene.render.camera.follow_tool) {
+          follow_tool(camera, pose.position);
+          rs.camera = camera;
+        }
+      }
+      if (!cut_object.removed) add_overlays(rs, scene.render.overlays, m, slots, sim.state().x);
       Image image = renderer->render(rs);
       render_ms.push_back(ms_since(t0));
       if (writer) writer->push(frame, std::move(image));
@@ -335,7 +441,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
     };
     if (rendering) {
       // A box primitive's 12 triangles would shade flat under deformation: draw it as a finer grid of its faces.
-      if (scene.object.surface_is_box) tissue = embed_surface(m, box_surface(box3(scene.object.surface_box), 32));
+      if (!cut_object.graph) tissue = embed_surface(m0, box_surface(box3(scene.object.surface_box), 32));
       camera = make_camera(scene.render.camera, sim::bounds(surface));
       if (scene.output.frames) {
         const fs::path frames_dir = out / "frames";
@@ -346,6 +452,47 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
       render_frame();
     }
 
+    // Cuts: each event runs the pipeline on the blade where its tool is at the event's time.
+    cutting::CutOptions cut_options;
+    cut_options.fragments = scene.cutting.remove_fragments == "none"    ? cutting::FragmentPolicy::none
+                            : scene.cutting.remove_fragments == "small" ? cutting::FragmentPolicy::small
+                                                                        : cutting::FragmentPolicy::all;
+    cut_options.fragment_volume = scene.cutting.fragment_volume;
+    cut_options.verify = scene.cutting.verify;
+    std::size_t next_event = 0;
+    const auto run_due_cuts = [&] {
+      while (next_event < events.size() && events[next_event].t <= sim.state().t + 1e-9 * scene.solver.dt) {
+        const CutEvent ev = events[next_event++];
+        const ToolPose pose = tool_pose(scene.tools[ev.tool], ev.t);
+        cutting::CutRequest req;
+        req.blade = tools[ev.tool].blade;
+        for (sim::Vec3& p : req.blade.vertices) p = pose.rotation * p + pose.position;
+        req.inscribed_radius = tools[ev.tool].inscribed_radius;
+        const cutting::CutOutcome o = cutting::apply_cut(cut_object, sim, embedding, req, cut_options);
+        CutSummary c;
+        c.t = ev.t;
+        c.tool = scene.tools[ev.tool].name;
+        c.status = o.status;
+        c.reason = o.reason;
+        c.components = o.components;
+        c.removed_volume_m3 = o.removed_volume;
+        c.tets_removed = o.tets_removed;
+        c.leaves_refined = o.leaves_refined;
+        c.fragments_removed = o.fragments_removed;
+        c.fragment_volume_m3 = o.fragment_volume;
+        c.elements_after = cut_object.removed ? 0 : sim.model().num_elements();
+        c.dofs_after = cut_object.removed ? 0 : sim.model().num_dofs();
+        c.surface_vertices_after = long(cut_object.surface.num_vertices());
+        c.ms = {o.ms.back_transform, o.ms.surface, o.ms.material_graph, o.ms.refine, o.ms.node_split,
+                o.ms.embedding,      o.ms.solver_update, o.ms.total};
+        report.cuts.push_back(c);
+        if (o.status == "skipped")
+          report.warnings.push_back("cut at t = " + format_seconds(ev.t) + " by " + c.tool + " skipped: " + o.reason);
+        if (o.status == "ok") update_surface();
+      }
+    };
+    run_due_cuts();
+
     // Timeline: fixed steps of dt up to the duration.
     const long steps = step_count(scene);
     const bool tty = options.progress && isatty(STDERR_FILENO);
@@ -353,8 +500,16 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
     for (long i = 0; i < steps; ++i) {
       if (g_interrupted) throw std::runtime_error("interrupted by a signal");
       const auto t0 = Clock::now();
-      sim.step();
+      if (!cut_object.removed) {
+        sim.step();
+      } else {
+        // Nothing left to simulate: time still runs for the tools and the renderer.
+        sim::SimState st = sim.state();
+        st.t += scene.solver.dt;
+        sim.set_state(std::move(st));
+      }
       update_surface();
+      run_due_cuts();
       step_ms.push_back(ms_since(t0));
       report.steps = i + 1;
       if (scene.output.surface_every > 0 && (i + 1) % scene.output.surface_every == 0) {
@@ -373,9 +528,23 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
       }
     }
 
-    // Results: probes, energies, stability counters.
+    // Results: counts of the final revision, S after the cuts, probes, energies, stability counters.
+    const sim::ObjectModel& m = sim.model();
+    record_counts();
+    // S is free of self-intersections: load_mesh rejects a self-intersecting mesh (CGAL, exact predicates), a box
+    // grid cannot intersect itself, and every cut checks its changed faces (cutting.verify) or is skipped. With
+    // verification off, the whole surface is checked here.
+    report.surface_self_intersecting =
+        !scene.cutting.verify && !report.cuts.empty() && !surface.triangles.empty() &&
+        cutting::find_self_intersection(surface).has_value();
+    report.rest_volume_m3 = sim::signed_volume(surface);
     for (const Probe& p : scene.probes) {
-      const auto e = m.embed(v3(p.point));
+      const auto e = cut_object.removed ? std::nullopt : m.embed(v3(p.point));
+      if (!e) {
+        report.warnings.push_back("probe " + p.name + ": its point was cut away");
+        report.probes.push_back({p.name, p.point, {NAN, NAN, NAN}});
+        continue;
+      }
       report.probes.push_back({p.name, p.point, a3(sim.position(*e) - v3(p.point))});
     }
     bool finite = true;
@@ -390,8 +559,8 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
     report.speed_limit = st.speed_limit;
     report.newton_unconverged = st.newton_unconverged;
     report.max_speed_m_s = st.max_speed;
-    report.kinetic_j = sim.kinetic_energy();
-    report.elastic_j = sim.elastic_energy();
+    report.kinetic_j = cut_object.removed ? 0.0 : sim.kinetic_energy();
+    report.elastic_j = cut_object.removed ? 0.0 : sim.elastic_energy();
     report.sim_time_s = sim.state().t;
     if (st.failed_steps > 0)
       report.warnings.push_back(std::to_string(st.failed_steps) +
@@ -426,6 +595,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
   report.frames_rendered = long(render_ms.size());
   report.step_ms = TimingSummary::of(step_ms);
   report.wall_time_s = ms_since(wall0) / 1000.0;
+  result.cuts = report.cuts;
   try {
     write_file_atomic(result.report_path, report_json(report));
   } catch (const std::exception& e) {

@@ -320,6 +320,24 @@ void Simulator::set_model(ObjectModel model) {
   rebuild();
 }
 
+void Simulator::refresh_solver() {
+  const int nd = m_model.num_dofs();
+  if (nd == 0) return;
+  ElementFrame frame;
+  m_fem->rotations(m_state.x, frame);
+  const VecX u = VecX::Zero(3 * nd);
+  VecX coupling;
+  const double dt = m_options.dt;
+  if (m_options.dynamic) {
+    m_fem->assemble_system(1.0 + dt * m_model.params().rayleigh_mass, dt * m_model.params().rayleigh_stiffness + dt * dt,
+                           frame, m_constrained, u, m_A, coupling);
+  } else {
+    m_fem->assemble_system(0.0, 1.0, frame, m_constrained, u, m_A, coupling);
+  }
+  m_solver->analyze_pattern(m_A);
+  m_pattern_analyzed = true;
+}
+
 void Simulator::set_state(SimState state) {
   if (int(state.x.size()) != m_model.num_dofs() || state.v.size() != state.x.size())
     throw std::invalid_argument("Simulator::set_state: state does not match the model");

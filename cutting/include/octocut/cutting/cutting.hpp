@@ -1,8 +1,17 @@
 #pragma once
-// The cut pipeline (SPEC §4) lands with the cutting issue. Until then this module only reports its stage names, so
-// that the dependency chain app -> engine -> cutting -> sim exists from the start.
+// The cut pipeline (SPEC §4, paper §3–4): one volumetric, non-progressive cut of a deformable object by a closed
+// blade, in five timed stages, as one transaction. No CGAL type appears here; the exact surface boolean lives in
+// cutting/src/surface_cut.cpp.
 #include <array>
+#include <memory>
+#include <string>
 #include <string_view>
+#include <vector>
+
+#include "octocut/sim/embedding.hpp"
+#include "octocut/sim/material_graph.hpp"
+#include "octocut/sim/simulator.hpp"
+#include "octocut/sim/surface.hpp"
 
 namespace octocut::cutting {
 
@@ -12,5 +21,67 @@ inline constexpr std::array<std::string_view, 7> kStageNames = {
 
 /// True when this build contains the cut pipeline.
 bool pipeline_available();
+
+/// What happens to material that a cut separates from every handle.
+enum class FragmentPolicy {
+  all,    ///< every loose piece is removed from the simulation
+  small,  ///< only loose pieces below CutOptions::fragment_volume are removed
+  none,   ///< loose pieces stay (they fall freely)
+};
+
+struct CutOptions {
+  double max_condition = 10.0;                  ///< shape matching: blend towards the rotation above this cond(A)
+  FragmentPolicy fragments = FragmentPolicy::all;
+  double fragment_volume = 1e-9;                ///< m^3; the threshold of FragmentPolicy::small
+  bool verify = true;                           ///< check S after the boolean (closed, manifold, no self-intersection)
+};
+
+/// The parts of one deformable object that cuts edit, besides the simulator and the embedding.
+struct CutObject {
+  sim::TriMesh surface;                              ///< S in rest space, m
+  std::vector<char> cut_faces;                       ///< 1 for a triangle of S that came from a blade (|F|)
+  std::shared_ptr<const sim::MaterialGraph> graph;   ///< M; it must be the model's material source
+  bool removed = false;                              ///< every element was cut away: nothing is simulated any more
+};
+
+/// One cut event: the blade where it is when the cut happens.
+struct CutRequest {
+  sim::TriMesh blade;              ///< closed, outward-oriented, in world (deformed) space, m
+  double inscribed_radius = 0.0;   ///< radius of the blade's largest inscribed sphere, m (paper §4.4.1's r)
+};
+
+/// Wall time of each stage, ms, in the order of kStageNames, and the total.
+struct CutStageMs {
+  double back_transform = 0.0, surface = 0.0, material_graph = 0.0, refine = 0.0, node_split = 0.0,
+         embedding = 0.0, solver_update = 0.0, total = 0.0;
+};
+
+/// What one cut did (the report's `cuts[]` entry, SPEC §8).
+struct CutOutcome {
+  std::string status = "skipped";     ///< "ok" | "skipped" | "no-op"
+  std::string reason;                 ///< why the cut was skipped or was a no-op; empty when ok
+  int components = 0;                 ///< connected material components the blade touched (one transform each)
+  double removed_volume = 0.0;        ///< V(S) - V(S'), m^3: the blade's share, fragments not included
+  int tets_removed = 0;               ///< tets of M the blade touched
+  int leaves_refined = 0;             ///< refine operations
+  int fragments_removed = 0;          ///< loose pieces removed from the simulation
+  double fragment_volume = 0.0;       ///< their material volume, m^3
+  double max_blend = 0.0;             ///< largest shape-matching blend towards the rotation (0: none)
+  CutStageMs ms;
+};
+
+/// Runs one cut on an object (SPEC §4):
+/// 1. back_transform: the leaves whose deformed hexahedra meet the blade, grouped into face- and material-connected
+///    components; per component a shape-matching affine map maps the blade into rest space (B'_i).
+/// 2. surface: S <- S \ B'_i, an exact local boolean.
+/// 3. material_graph: the tets of M that meet B'_i are removed.
+/// 4. refine (leaves meeting B'_i with edge > r / sqrt(3), within max_level), then node_split (occupancy and
+///    connectivity of the touched leaves, DOFs by node splitting), then loose fragments per `options`.
+/// 5. embedding: the Z-curve list and weights, then the solver's symbolic analysis.
+/// The cut is a transaction: on any failure (a stage throws, the boolean fails its checks, numerical trouble) the
+/// object, the simulator and the embedding are left exactly as they were and the outcome is "skipped" with the reason.
+/// A blade that changes nothing is a "no-op". Never throws for geometric or numerical trouble.
+CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceEmbedding& embedding,
+                     const CutRequest& request, const CutOptions& options);
 
 }  // namespace octocut::cutting

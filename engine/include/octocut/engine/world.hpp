@@ -1,5 +1,6 @@
 #pragma once
 // The world: builds the simulation of a scene and runs its timeline, writing report.json (SPEC §5, §8).
+#include <array>
 #include <memory>
 #include <string>
 #include <vector>
@@ -50,11 +51,32 @@ struct RunOptions {
   bool progress = false;        ///< print a progress line to stderr
 };
 
+/// Names of the timed parts of a cut in CutSummary::ms: the stages of SPEC §4, then the total.
+inline constexpr std::array<const char*, 8> kCutStageKeys = {
+    "back_transform", "surface", "material_graph", "refine", "node_split", "embedding", "solver_update", "total"};
+
+/// One cut event of a run (the report's `cuts[]`, SPEC §8).
+struct CutSummary {
+  double t = 0.0;                  ///< time of the cut, s
+  std::string tool;                ///< the tool's name
+  std::string status;              ///< "ok" | "skipped" | "no-op"
+  std::string reason;              ///< why skipped or no-op; empty when ok
+  int components = 0;              ///< material components the blade touched
+  double removed_volume_m3 = 0.0;  ///< V(S) - V(S') of the boolean, m^3
+  int tets_removed = 0;            ///< tets of M removed
+  int leaves_refined = 0;          ///< refine operations
+  int fragments_removed = 0;       ///< loose pieces removed
+  double fragment_volume_m3 = 0.0; ///< their material volume, m^3
+  long elements_after = 0, dofs_after = 0, surface_vertices_after = 0;
+  std::array<double, 8> ms{};      ///< per kCutStageKeys, ms
+};
+
 /// What a run ended with.
 struct RunResult {
   int exit_code = 0;        ///< 0 ok, 1 the run failed (report written), 2 bad input
   std::string report_path;  ///< where report.json was written
   std::string error;        ///< the failure, when exit_code != 0
+  std::vector<CutSummary> cuts;  ///< every cut event, in order
 };
 
 /// Runs a loaded scene to its duration and writes DIR/report.json atomically, also when the run fails part-way.

@@ -97,6 +97,9 @@ class Simulator {
 
   /// Replaces the model (a new revision) and carries the state over.
   void set_model(ObjectModel model);
+  /// Builds the system matrix pattern of the current revision and runs the linear solver's symbolic analysis now,
+  /// instead of in the next step (a cut calls it, so that its cost is counted where the topology changed).
+  void refresh_solver();
   /// Replaces the state (same revision).
   void set_state(SimState state);
 

@@ -1,0 +1,123 @@
+// `octocut cut` (SPEC §7): one rest-space cut, its octocut.cut/1 report, and bad blades that write nothing.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <numbers>
+
+#include "cli_util.hpp"
+#include "octocut/engine/mesh_io.hpp"
+#include "octocut/sim/primitives.hpp"
+#include "octocut/sim/surface_check.hpp"
+
+namespace octocut {
+namespace {
+
+namespace fs = std::filesystem;
+using sim::Vec3;
+
+// A closed, outward n-gon prism around z, in the units the caller chooses.
+sim::TriMesh prism(const Vec3& c, double r, double h, int n) {
+  sim::TriMesh m;
+  for (int s = 0; s < 2; ++s)
+    for (int i = 0; i < n; ++i) {
+      const double a = 2.0 * std::numbers::pi * i / n;
+      m.vertices.push_back(c + Vec3(r * std::cos(a), r * std::sin(a), (s ? 0.5 : -0.5) * h));
+    }
+  m.vertices.push_back(c + Vec3(0, 0, -0.5 * h));
+  m.vertices.push_back(c + Vec3(0, 0, 0.5 * h));
+  for (int i = 0; i < n; ++i) {
+    const int j = (i + 1) % n;
+    m.triangles.push_back({i, j, n + j});
+    m.triangles.push_back({i, n + j, n + i});
+    m.triangles.push_back({2 * n, j, i});
+    m.triangles.push_back({2 * n + 1, n + i, n + j});
+  }
+  return m;
+}
+
+struct CutCli : ::testing::Test {
+  fs::path dir;
+  void SetUp() override {
+    dir = fs::temp_directory_path() / ("octocut_cli_cut_" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    // A 20 mm cube in millimetres, gridded, and a 2 mm-radius, 32-gon punch through it.
+    engine::save_mesh(dir / "cube.ply", sim::closed_box_grid({Vec3(0, 0, 0), Vec3(20, 20, 20)}, 10));
+    engine::save_mesh(dir / "punch.ply", prism(Vec3(10, 10, 10), 2.0, 30.0, 32));
+  }
+  void TearDown() override { fs::remove_all(dir); }
+  std::string p(const std::string& name) const { return "'" + (dir / name).string() + "'"; }
+  nlohmann::json report(const std::string& name) const {
+    std::ifstream in(dir / name);
+    return nlohmann::json::parse(in);
+  }
+};
+
+TEST_F(CutCli, PunchThroughACubeReportsTheExactVolume) {
+  const auto r = test::run_octocut("cut --surface " + p("cube.ply") + " --blade " + p("punch.ply") + " --out " +
+                                   p("out.ply") + " --scale 0.001 --report " + p("cut.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const nlohmann::json j = report("cut.json");
+  EXPECT_EQ(j["schema"], "octocut.cut/1");
+  EXPECT_EQ(j["status"], "ok");
+  const double area = 0.5 * 32 * 4e-6 * std::sin(2.0 * std::numbers::pi / 32);  // m^2
+  const double removed = area * 0.02;                                          // m^3
+  EXPECT_NEAR(j["removed_volume_m3"].get<double>(), removed, 1e-9 * removed);
+  EXPECT_NEAR(j["input_volume_m3"].get<double>(), 8e-6, 1e-18);
+  EXPECT_NEAR(j["output_volume_m3"].get<double>(), 8e-6 - removed, 1e-15);
+  EXPECT_EQ(j["closed"], true);
+  EXPECT_EQ(j["self_intersecting"], false);
+  EXPECT_EQ(j["components"], 1);
+  EXPECT_GT(j["material_graph"]["tets_removed"].get<int>(), 0);
+  for (const char* k : {"surface", "material_graph", "total"}) EXPECT_GE(j["ms"][k].get<double>(), 0.0) << k;
+  // The output is in metres, closed, and has the reported volume.
+  const sim::TriMesh out = engine::load_mesh(dir / "out.ply", {1.0, true, true}).mesh;
+  EXPECT_NEAR(sim::signed_volume(out), 8e-6 - removed, 1e-15);
+  EXPECT_EQ(long(out.num_vertices()), j["output_vertices"].get<long>());
+}
+
+TEST_F(CutCli, BladeThatMissesIsANoOp) {
+  engine::save_mesh(dir / "far.ply", prism(Vec3(50, 50, 50), 2.0, 5.0, 16));
+  const auto r = test::run_octocut("cut --surface " + p("cube.ply") + " --blade " + p("far.ply") + " --out " +
+                                   p("out.off") + " --scale 0.001 --report " + p("cut.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(report("cut.json")["status"], "no-op");
+  EXPECT_DOUBLE_EQ(report("cut.json")["removed_volume_m3"].get<double>(), 0.0);
+  EXPECT_TRUE(fs::exists(dir / "out.off"));
+}
+
+TEST_F(CutCli, BadBladesExitTwoAndWriteNothing) {
+  // Open: one triangle missing.
+  sim::TriMesh open = prism(Vec3(10, 10, 10), 2.0, 30.0, 16);
+  open.triangles.pop_back();
+  std::ofstream(dir / "open.obj") << [&] {
+    std::string s;
+    for (const Vec3& v : open.vertices) s += "v " + std::to_string(v.x()) + " " + std::to_string(v.y()) + " " + std::to_string(v.z()) + "\n";
+    for (const auto& t : open.triangles)
+      s += "f " + std::to_string(t[0] + 1) + " " + std::to_string(t[1] + 1) + " " + std::to_string(t[2] + 1) + "\n";
+    return s;
+  }();
+  // NaN coordinates.
+  std::ofstream(dir / "nan.obj") << "v 0 0 0\nv 1 0 0\nv 0 nan 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\n";
+  // Self-intersecting: two overlapping closed prisms in one file.
+  sim::TriMesh twice = prism(Vec3(10, 10, 10), 2.0, 30.0, 16);
+  const sim::TriMesh other = prism(Vec3(11, 10, 10), 2.0, 30.0, 16);
+  const int off = int(twice.vertices.size());
+  twice.vertices.insert(twice.vertices.end(), other.vertices.begin(), other.vertices.end());
+  for (auto t : other.triangles) twice.triangles.push_back({t[0] + off, t[1] + off, t[2] + off});
+  engine::save_mesh(dir / "twice.ply", twice);
+  for (const char* bad : {"open.obj", "nan.obj", "twice.ply"}) {
+    const auto r = test::run_octocut("cut --surface " + p("cube.ply") + " --blade " + p(bad) + " --out " +
+                                     p("out.ply") + " --report " + p("cut.json"));
+    EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.output;
+    EXPECT_NE(r.output.find(bad), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(dir / "out.ply")) << bad;
+    EXPECT_FALSE(fs::exists(dir / "cut.json")) << bad;
+  }
+}
+
+}  // namespace
+}  // namespace octocut

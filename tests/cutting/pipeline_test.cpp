@@ -1,0 +1,320 @@
+// The cut pipeline end to end (SPEC §4) on box objects whose material graph is a Kuhn tet grid: every check is
+// against an independent truth (analytic volumes of polygonal prisms, an own edge count for watertightness, CGAL's
+// exact self-intersection test, the Euler characteristic, and the invariants of P).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <numbers>
+
+#include "octocut/cutting/cutting.hpp"
+#include "octocut/cutting/mesh_check.hpp"
+#include "octocut/sim/primitives.hpp"
+#include "octocut/sim/surface_check.hpp"
+
+namespace octocut {
+namespace {
+
+using sim::Box3;
+using sim::Vec3;
+
+// A closed, outward n-gon prism around the z axis, centred on `c`, radius r (to the polygon's corners), height h, m.
+sim::TriMesh prism(const Vec3& c, double r, double h, int n) {
+  sim::TriMesh m;
+  for (int s = 0; s < 2; ++s)
+    for (int i = 0; i < n; ++i) {
+      const double a = 2.0 * std::numbers::pi * i / n;
+      m.vertices.push_back(c + Vec3(r * std::cos(a), r * std::sin(a), (s ? 0.5 : -0.5) * h));
+    }
+  m.vertices.push_back(c + Vec3(0, 0, -0.5 * h));
+  m.vertices.push_back(c + Vec3(0, 0, 0.5 * h));
+  const int bc = 2 * n, tc = 2 * n + 1;
+  for (int i = 0; i < n; ++i) {
+    const int j = (i + 1) % n;
+    m.triangles.push_back({i, j, n + j});
+    m.triangles.push_back({i, n + j, n + i});
+    m.triangles.push_back({bc, j, i});
+    m.triangles.push_back({tc, n + i, n + j});
+  }
+  return m;
+}
+double prism_area(double r, int n) { return 0.5 * n * r * r * std::sin(2.0 * std::numbers::pi / n); }
+
+sim::TriMesh box_mesh(const Box3& b) { return sim::closed_box_grid(b, 1); }
+
+// Independent watertightness: every directed edge once, with its reverse once; no degenerate triangle.
+::testing::AssertionResult watertight(const sim::TriMesh& m) {
+  std::map<std::pair<int, int>, int> directed;
+  for (std::size_t f = 0; f < m.triangles.size(); ++f) {
+    const auto& t = m.triangles[f];
+    if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) return ::testing::AssertionFailure() << "degenerate " << f;
+    for (int k = 0; k < 3; ++k) ++directed[{t[std::size_t(k)], t[std::size_t((k + 1) % 3)]}];
+  }
+  for (const auto& [e, n] : directed) {
+    if (n != 1) return ::testing::AssertionFailure() << "edge " << e.first << "-" << e.second << " used " << n << " times";
+    const auto r = directed.find({e.second, e.first});
+    if (r == directed.end() || r->second != 1)
+      return ::testing::AssertionFailure() << "edge " << e.first << "-" << e.second << " has no opposite";
+  }
+  if (!m.triangles.empty() && cutting::find_self_intersection(m))
+    return ::testing::AssertionFailure() << "self-intersecting";
+  return ::testing::AssertionSuccess();
+}
+
+long euler_characteristic(const sim::TriMesh& m) {
+  return long(m.vertices.size()) - long(m.triangles.size()) * 3 / 2 + long(m.triangles.size());
+}
+
+// A box object with its tet-grid M, a simulator and the embedding of its surface.
+struct Object {
+  cutting::CutObject cut;
+  std::unique_ptr<sim::Simulator> sim;
+  std::unique_ptr<sim::SurfaceEmbedding> emb;
+};
+
+Object make_object(const Box3& box, const sim::RootGeometry& root, int base, int max_level,
+                   std::vector<sim::HandleSpec> handles, double cell = 0.001) {
+  Object o;
+  o.cut.graph = std::make_shared<sim::MaterialGraph>(sim::box_tet_mesh(box, cell));
+  o.cut.surface = sim::closed_box_grid(box, 16);
+  o.cut.cut_faces.assign(o.cut.surface.triangles.size(), 0);
+  sim::OctreeSpec spec;
+  spec.root = root;
+  spec.base_level = base;
+  spec.max_level = max_level;
+  sim::MaterialParams p;
+  p.young_modulus = 1e5;
+  p.poisson_ratio = 0.3;
+  p.density = 1000.0;
+  sim::ObjectModel model = sim::ObjectModel::build(spec, o.cut.graph, p, std::move(handles));
+  sim::SimulatorOptions so;
+  so.dt = 1e-3;
+  so.gravity = Vec3::Zero();
+  so.threads = 1;
+  o.sim = std::make_unique<sim::Simulator>(std::move(model), so);
+  o.emb = std::make_unique<sim::SurfaceEmbedding>(o.sim->model(), o.cut.surface.vertices, o.cut.surface.triangles);
+  return o;
+}
+
+cutting::CutOutcome cut(Object& o, const sim::TriMesh& blade, double r, cutting::CutOptions opt = {}) {
+  cutting::CutRequest req{blade, r};
+  return cutting::apply_cut(o.cut, *o.sim, *o.emb, req, opt);
+}
+
+// The slab of most tests: 40 x 40 x 4 mm, held along x < 5 mm.
+const Box3 kSlab{Vec3(0, 0, 0), Vec3(0.04, 0.04, 0.004)};
+const sim::RootGeometry kSlabRoot{Vec3(-0.002, -0.002, -0.02), 0.044};
+sim::HandleSpec left_handle() { return {{Vec3(-1, -1, -1), Vec3(0.005, 1, 1)}, {}}; }
+sim::HandleSpec right_handle() { return {{Vec3(0.035, -1, -1), Vec3(1, 1, 1)}, {}}; }
+
+TEST(CutPipeline, PunchThroughASlabAtRest) {
+  Object o = make_object(kSlab, kSlabRoot, 4, 7, {left_handle()});
+  const int elements0 = o.sim->model().num_elements();
+  const double v0 = sim::signed_volume(o.cut.surface);
+  const double r = 0.002;
+  const int n = 32;
+  const auto out = cut(o, prism(Vec3(0.02, 0.02, 0.002), r, 0.01, n), r * std::cos(std::numbers::pi / n));
+  ASSERT_EQ(out.status, "ok") << out.reason;
+  EXPECT_EQ(out.components, 1);
+  // The boolean is exact: the removed volume is the prism's area times the slab's thickness.
+  const double expect = prism_area(r, n) * 0.004;
+  EXPECT_NEAR(out.removed_volume, expect, 1e-9 * expect);
+  EXPECT_NEAR(v0 - sim::signed_volume(o.cut.surface), out.removed_volume, 1e-12 * v0);
+  EXPECT_TRUE(watertight(o.cut.surface));
+  // One through-hole: genus 1, chi = 0.
+  EXPECT_EQ(euler_characteristic(o.cut.surface), 0);
+  EXPECT_GT(out.tets_removed, 0);
+  EXPECT_GT(o.sim->model().num_elements(), elements0);
+  EXPECT_EQ(o.sim->model().dofs().check_invariants(), "");
+  EXPECT_EQ(o.cut.cut_faces.size(), o.cut.surface.triangles.size());
+  EXPECT_GT(std::count(o.cut.cut_faces.begin(), o.cut.cut_faces.end(), 1), 0);
+  // The refinement oracle: no leaf that meets the blade's rest volume is longer than r / sqrt(3), unless at max_level.
+  const double le = r * std::cos(std::numbers::pi / n) / std::sqrt(3.0);
+  const sim::ObjectModel& m = o.sim->model();
+  for (int e = 0; e < m.num_elements(); ++e) {
+    const Box3 b = m.root().cell_box(m.tree().leaf(e));
+    // Distance in xy from the blade's axis to the box, against the polygon's inradius (a conservative meet test).
+    const double dx = std::max({b.min.x() - 0.02, 0.0, 0.02 - b.max.x()});
+    const double dy = std::max({b.min.y() - 0.02, 0.0, 0.02 - b.max.y()});
+    if (std::hypot(dx, dy) < 0.9 * r * std::cos(std::numbers::pi / n))
+      EXPECT_TRUE(m.edge()[std::size_t(e)] <= le * (1 + 1e-12) || m.tree().leaf(e).level == m.max_level()) << e;
+  }
+  // The cut object keeps simulating.
+  for (int i = 0; i < 5; ++i) o.sim->step();
+  for (const Vec3& x : o.sim->state().x) ASSERT_TRUE(x.allFinite());
+  EXPECT_EQ(o.sim->stats().failed_steps, 0);
+}
+
+TEST(CutPipeline, BladeThatMissesIsANoOp) {
+  Object o = make_object(kSlab, kSlabRoot, 4, 7, {left_handle()});
+  const sim::TriMesh s0 = o.cut.surface;
+  const int e0 = o.sim->model().num_elements(), rev0 = o.sim->model().revision();
+  const auto out = cut(o, prism(Vec3(0.02, 0.02, 0.02), 0.002, 0.004, 16), 0.0015);
+  EXPECT_EQ(out.status, "no-op");
+  EXPECT_FALSE(out.reason.empty());
+  EXPECT_EQ(o.cut.surface.vertices, s0.vertices);
+  EXPECT_EQ(o.cut.surface.triangles, s0.triangles);
+  EXPECT_EQ(o.sim->model().num_elements(), e0);
+  EXPECT_EQ(o.sim->model().revision(), rev0);
+}
+
+TEST(CutPipeline, BladeThatRemovesTheWholeObject) {
+  Object o = make_object(kSlab, kSlabRoot, 4, 7, {left_handle()});
+  const auto out = cut(o, box_mesh({Vec3(-0.01, -0.01, -0.01), Vec3(0.05, 0.05, 0.02)}), 0.015);
+  ASSERT_EQ(out.status, "ok") << out.reason;
+  EXPECT_TRUE(o.cut.removed);
+  EXPECT_TRUE(o.cut.surface.triangles.empty());
+  // Further cuts are no-ops.
+  EXPECT_EQ(cut(o, prism(Vec3(0.02, 0.02, 0.002), 0.002, 0.01, 16), 0.0015).status, "no-op");
+}
+
+TEST(CutPipeline, CavityUnderAnAffineStretchRemovesTheBackTransformedVolume) {
+  // A block 20 x 20 x 10 mm, stretched by 1.25 along x (every DOF at F X): shape matching recovers F exactly, so a
+  // blade inside the deformed block removes V(B) / det F of rest material.
+  const Box3 block{Vec3(0, 0, 0), Vec3(0.02, 0.02, 0.01)};
+  Object o = make_object(block, {Vec3(-0.001, -0.001, -0.006), 0.022}, 4, 7, {});
+  sim::SimState st = o.sim->state();
+  const sim::Mat3 F = Vec3(1.25, 1.0, 1.0).asDiagonal();
+  for (std::size_t d = 0; d < st.x.size(); ++d) st.x[d] = F * o.sim->model().dofs().dof_rest[d];
+  o.sim->set_state(st);
+  const double v0 = sim::signed_volume(o.cut.surface);
+  const sim::TriMesh blade = prism(Vec3(0.0125, 0.01, 0.005), 0.002, 0.004, 24);
+  const auto out = cut(o, blade, 0.0015);
+  ASSERT_EQ(out.status, "ok") << out.reason;
+  const double expect = prism_area(0.002, 24) * 0.004 / 1.25;
+  EXPECT_NEAR(out.removed_volume, expect, 1e-9 * expect);
+  EXPECT_NEAR(v0 - sim::signed_volume(o.cut.surface), expect, 1e-9 * expect);
+  EXPECT_TRUE(watertight(o.cut.surface));
+  EXPECT_EQ(sim::check_surface(o.cut.surface).components, 2);  // the outer surface and the cavity
+  EXPECT_EQ(euler_characteristic(o.cut.surface), 4);             // two spheres
+  EXPECT_DOUBLE_EQ(out.max_blend, 0.0);
+}
+
+TEST(CutPipeline, FiftyPunchesAtOneSpotStayBounded) {
+  Object o = make_object(kSlab, kSlabRoot, 4, 7, {left_handle()});
+  const sim::TriMesh blade = prism(Vec3(0.02, 0.02, 0.002), 0.002, 0.01, 32);
+  long after_first = 0;
+  for (int i = 0; i < 50; ++i) {
+    const auto out = cut(o, blade, 0.0019);
+    ASSERT_TRUE(out.status == "ok" || out.status == "no-op") << i << ": " << out.status << " " << out.reason;
+    if (i == 0) {
+      ASSERT_EQ(out.status, "ok");
+      after_first = o.sim->model().num_elements();
+    }
+    o.sim->step();
+  }
+  EXPECT_LE(o.sim->model().num_elements(), 2 * after_first);
+  EXPECT_TRUE(watertight(o.cut.surface));
+  for (const Vec3& x : o.sim->state().x) ASSERT_TRUE(x.allFinite());
+}
+
+TEST(CutPipeline, PunchIntoInvertedElementsNeverCrashes) {
+  Object o = make_object(kSlab, kSlabRoot, 4, 7, {left_handle()});
+  // Mirror the whole object through the plane z = 2 mm: every element is inverted (det F = -1).
+  sim::SimState st = o.sim->state();
+  for (sim::Vec3& x : st.x) x.z() = 0.004 - x.z();
+  o.sim->set_state(st);
+  const auto out = cut(o, prism(Vec3(0.02, 0.02, 0.002), 0.002, 0.01, 32), 0.0019);
+  ASSERT_TRUE(out.status == "ok" || out.status == "skipped") << out.reason;
+  EXPECT_TRUE(watertight(o.cut.surface));
+  EXPECT_EQ(o.sim->model().dofs().check_invariants(), "");
+  for (int i = 0; i < 3; ++i) o.sim->step();
+  for (const Vec3& x : o.sim->state().x) ASSERT_TRUE(x.allFinite());
+}
+
+TEST(CutPipeline, FoldedSlabPunchedOnceShowsTwoHolesInRestSpace) {
+  // An 80 x 30 x 4 mm slab folded about x = 40 mm: the right half rotated by 180 degrees about y and laid 6 mm
+  // above the left half. One vertical punch at x = 20 mm goes through both layers: two components, two transforms,
+  // two holes at rest x = 20 mm and x = 60 mm.
+  const Box3 slab{Vec3(0, 0, 0), Vec3(0.08, 0.03, 0.004)};
+  Object o = make_object(slab, {Vec3(-0.002, -0.027, -0.04), 0.084}, 5, 7, {});
+  sim::SimState st = o.sim->state();
+  for (std::size_t d = 0; d < st.x.size(); ++d) {
+    const Vec3 X = o.sim->model().dofs().dof_rest[d];
+    if (X.x() > 0.04) st.x[d] = Vec3(0.08 - X.x(), X.y(), 0.014 - X.z());
+  }
+  o.sim->set_state(st);
+  const double r = 0.002;
+  const auto out = cut(o, prism(Vec3(0.02, 0.015, 0.007), r, 0.03, 32), r * std::cos(std::numbers::pi / 32));
+  ASSERT_EQ(out.status, "ok") << out.reason;
+  EXPECT_EQ(out.components, 2);
+  const double expect = 2.0 * prism_area(r, 32) * 0.004;
+  EXPECT_NEAR(out.removed_volume, expect, 1e-9 * expect);
+  EXPECT_TRUE(watertight(o.cut.surface));
+  EXPECT_EQ(euler_characteristic(o.cut.surface), -2);  // genus 2: two through-holes
+  // The holes are where the back-transforms put them.
+  int near20 = 0, near60 = 0;
+  for (std::size_t f = 0; f < o.cut.surface.triangles.size(); ++f) {
+    if (!o.cut.cut_faces[f]) continue;
+    const double x = o.cut.surface.vertices[std::size_t(o.cut.surface.triangles[f][0])].x();
+    near20 += std::abs(x - 0.02) <= r + 1e-9;
+    near60 += std::abs(x - 0.06) <= r + 1e-9;
+  }
+  EXPECT_GT(near20, 0);
+  EXPECT_GT(near60, 0);
+}
+
+TEST(CutPipeline, FailedStageLeavesEverythingAsItWas) {
+  Object o = make_object(kSlab, kSlabRoot, 4, 7, {left_handle()});
+  const sim::TriMesh s0 = o.cut.surface;
+  const int e0 = o.sim->model().num_elements(), d0 = o.sim->model().num_dofs();
+  const std::vector<Vec3> x0 = o.sim->state().x;
+  // An open blade (one triangle missing): the boolean refuses it, and the cut is skipped as a whole.
+  sim::TriMesh blade = prism(Vec3(0.02, 0.02, 0.002), 0.002, 0.01, 16);
+  blade.triangles.pop_back();
+  const auto out = cut(o, blade, 0.0015);
+  EXPECT_EQ(out.status, "skipped");
+  EXPECT_FALSE(out.reason.empty());
+  EXPECT_EQ(o.cut.surface.vertices, s0.vertices);
+  EXPECT_EQ(o.cut.surface.triangles, s0.triangles);
+  EXPECT_EQ(o.sim->model().num_elements(), e0);
+  EXPECT_EQ(o.sim->model().num_dofs(), d0);
+  EXPECT_EQ(o.sim->state().x, x0);
+  EXPECT_EQ(o.emb->num_vertices(), int(s0.vertices.size()));
+}
+
+// A 12 mm-wide wall through the slab's whole width and thickness cuts it in two.
+sim::TriMesh wall() { return box_mesh({Vec3(0.017, -0.01, -0.01), Vec3(0.023, 0.05, 0.014)}); }
+
+TEST(CutPipeline, SlabCutInTwoKeepsBothHeldHalves) {
+  Object o = make_object(kSlab, kSlabRoot, 4, 7, {left_handle(), right_handle()});
+  const auto out = cut(o, wall(), 0.003);
+  ASSERT_EQ(out.status, "ok") << out.reason;
+  EXPECT_EQ(out.fragments_removed, 0);
+  int count = 0;
+  sim::element_components(o.sim->model(), count);
+  EXPECT_EQ(count, 2);
+  EXPECT_EQ(sim::check_surface(o.cut.surface).components, 2);
+  EXPECT_TRUE(watertight(o.cut.surface));
+  const double expect = 0.006 * 0.04 * 0.004;
+  EXPECT_NEAR(out.removed_volume, expect, 1e-9 * expect);
+}
+
+TEST(CutPipeline, LooseHalfIsRemovedAsAFragment) {
+  for (const auto policy : {cutting::FragmentPolicy::all, cutting::FragmentPolicy::small, cutting::FragmentPolicy::none}) {
+    Object o = make_object(kSlab, kSlabRoot, 4, 7, {left_handle()});
+    cutting::CutOptions opt;
+    opt.fragments = policy;
+    opt.fragment_volume = 1e-6;  // m^3: the loose half (about 2.6e-6 m^3) is not small
+    const auto out = cut(o, wall(), 0.003, opt);
+    ASSERT_EQ(out.status, "ok") << out.reason;
+    int count = 0;
+    sim::element_components(o.sim->model(), count);
+    if (policy == cutting::FragmentPolicy::all) {
+      EXPECT_EQ(out.fragments_removed, 1);
+      EXPECT_EQ(count, 1);
+      EXPECT_EQ(sim::check_surface(o.cut.surface).components, 1);
+      // The right half's material is gone from the simulation: about 17 x 40 x 4 mm (the M tets the wall touched
+      // widen the gap by at most one 1 mm cell on each side).
+      EXPECT_NEAR(out.fragment_volume, 0.017 * 0.04 * 0.004, 0.0015 * 0.04 * 0.004);
+      EXPECT_TRUE(watertight(o.cut.surface));
+      for (const Vec3& x : o.cut.surface.vertices) EXPECT_LT(x.x(), 0.0175);
+    } else {
+      EXPECT_EQ(out.fragments_removed, 0);
+      EXPECT_EQ(count, 2);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace octocut

@@ -25,8 +25,7 @@ TEST_P(SceneRegression, PassesItsExpectedBlock) {
   EXPECT_GE(j["expected"].size(), 5u) << "too few checks in " << scene;
   const fs::path out = fs::temp_directory_path() / ("octocut_regression_" + GetParam() + "_" + std::to_string(::getpid()));
   fs::remove_all(out);
-  const auto r = test::run_octocut("run '" + scene.string() + "' --no-render --quiet --check --out '" + out.string() +
-                                   "' --set /output/frames=false");
+  const auto r = test::run_octocut("run '" + scene.string() + "' --no-render --quiet --check --out '" + out.string() + "'");
   EXPECT_EQ(r.exit_code, 0) << r.output;
   fs::remove_all(out);
 }

@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <stdexcept>
@@ -114,6 +116,13 @@ std::string text_of(const ordered_json& value) {
   return value.is_number_float() ? schema::format_number(value.get<double>()) : value.dump();
 }
 
+/// A derived number (a tolerance) for messages: 6 significant digits.
+std::string six_digits(double value) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.6g", value);
+  return text;
+}
+
 /// The failure of one check against report value `x`, or "" when it passes.
 std::string failure(const ordered_json& check, const ordered_json& x) {
   // Bare strings and booleans: equal.
@@ -138,7 +147,7 @@ std::string failure(const ordered_json& check, const ordered_json& x) {
     const double abs = check.is_number() ? 0.0 : check.value("abs", 0.0);
     const double tolerance = std::max(abs, rel * std::fabs(want));
     if (std::fabs(v - want) <= tolerance) return "";
-    return text_of(x) + " not within " + schema::format_number(want) + " ± " + schema::format_number(tolerance);
+    return text_of(x) + " not within " + schema::format_number(want) + " ± " + six_digits(tolerance);
   }
 
   // Ranges.
@@ -152,13 +161,11 @@ std::string failure(const ordered_json& check, const ordered_json& x) {
   return text_of(x) + (has_min ? " not >= " + text_of(check["min"]) : " not <= " + text_of(check["max"]));
 }
 
-/// Rounds `x` down (up when `up`) to `digits` significant digits.
-double round_significant(double x, int digits, bool up) {
-  if (x == 0.0 || !std::isfinite(x)) return x;
-  const double unit = std::pow(10.0, std::floor(std::log10(std::fabs(x))) - (digits - 1));
-  const double rounded = (up ? std::ceil(x / unit) : std::floor(x / unit)) * unit;
-  // Guard against the division's rounding: never move inward.
-  return up ? std::max(rounded, x) : std::min(rounded, x);
+/// `x` rounded to the nearest 6 significant digits.
+double round_six_digits(double x) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.6g", x);
+  return std::strtod(text, nullptr);
 }
 
 /// Returns `check` moved to the report value `x` (see regenerate_expected for the rules).
@@ -192,10 +199,9 @@ ordered_json regenerated(const ordered_json& check, const ordered_json& x) {
     out["max"] = static_cast<long long>(std::ceil(hi));
     return out;
   }
-  if (hi > lo) {
-    lo = round_significant(lo, 6, false);
-    hi = round_significant(hi, 6, true);
-  }
+  // Short bounds, unless rounding would leave the value outside.
+  if (round_six_digits(lo) <= v) lo = round_six_digits(lo);
+  if (round_six_digits(hi) >= v) hi = round_six_digits(hi);
   out["min"] = lo;
   out["max"] = hi;
   return out;

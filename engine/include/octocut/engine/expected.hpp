@@ -32,8 +32,8 @@ std::vector<std::string> check_expected(const std::string& expected_json, const 
 ///   - {"min": a, "max": b} is moved and scaled around the new value x: with the old midpoint m = (a + b) / 2, the
 ///     new bounds are x - (m - a) |x| / |m| and x + (b - m) |x| / |m| (the same relative half-widths), or
 ///     x - (m - a) and x + (b - m) when m or x is 0 (the same absolute half-widths). When a, b and x are all
-///     integers the bounds are rounded outward to integers; otherwise a non-empty interval is rounded outward to 6
-///     significant digits.
+///     integers the bounds are rounded outward to integers; otherwise each bound is rounded to 6 significant
+///     digits unless that would leave x outside.
 ///   - a one-sided {"min"} or {"max"} is a limit rather than a measured value, and is kept as it is.
 /// A check whose pointer the report lacks, or whose report value has the wrong type, is kept as it is (check_expected
 /// then reports it). The text has one member per line, check objects on one line, 2-space indentation. Throws

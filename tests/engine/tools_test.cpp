@@ -14,6 +14,7 @@
 
 #include "octocut/engine/expected.hpp"
 #include "octocut/engine/mesh_io.hpp"
+#include "octocut/engine/render_builder.hpp"
 #include "octocut/engine/scene_loader.hpp"
 #include "octocut/engine/tool.hpp"
 
@@ -77,6 +78,26 @@ TEST(ToolPose, SingleKeyframeIsConstantAndEulerOrderIsXThenYThenZ) {
     EXPECT_TRUE(pose.rotation.isApprox(expected, 1e-14)) << pose.rotation;
   }
   EXPECT_TRUE(euler_xyz_deg({90, 90, 0}).isApprox(expected, 1e-14));
+}
+
+TEST(ToolPose, AgreesWithTheRenderPropsPoseConvention) {
+  // The same keyframes as a tool and as a render prop give the same transform at every time, ends included.
+  const std::vector<ToolKeyframe> keys = {
+      {0.2, {0.01, 0.02, 0.03}, {10, -20, 30}}, {0.7, {-0.01, 0.0, 0.05}, {170, 45, -60}}, {1.1, {0, 0, 0}, {0, 0, 0}}};
+  const ToolSettings tool = tool_with(keys);
+  RenderProp prop;
+  for (const ToolKeyframe& k : keys) prop.keyframes.push_back({k.t, k.position, k.rotation_deg});
+  for (const double t : {0.0, 0.2, 0.3, 0.45, 0.7, 0.9, 1.1, 2.0}) {
+    const ToolPose pose = tool_pose(tool, t);
+    const Eigen::Matrix4d expected = prop_pose(prop, t);
+    EXPECT_TRUE(pose.rotation.isApprox(expected.topLeftCorner<3, 3>(), 1e-14)) << t;
+    EXPECT_TRUE(pose.position.isApprox(expected.topRightCorner<3, 1>(), 1e-14) ||
+                (pose.position - expected.topRightCorner<3, 1>()).norm() < 1e-16)
+        << t;
+    // A proper rotation.
+    EXPECT_NEAR(pose.rotation.determinant(), 1.0, 1e-14);
+    EXPECT_TRUE((pose.rotation.transpose() * pose.rotation).isApprox(sim::Mat3::Identity(), 1e-14));
+  }
 }
 
 // ---- cylinder_blade -------------------------------------------------------------------------------------------------

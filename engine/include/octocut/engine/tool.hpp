@@ -1,6 +1,7 @@
 #pragma once
 // Tools at run time (SPEC §4, §5): the pose of a keyframed tool, its blade and its render mesh in tool coordinates.
 // The world and the renderer turn these into cut events and metal meshes.
+#include <array>
 #include <cstddef>
 #include <string>
 #include <vector>

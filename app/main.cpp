@@ -9,16 +9,58 @@
 #include "assets.hpp"
 #include "octocut/engine/bench.hpp"
 #include "octocut/engine/cut_command.hpp"
+#include "octocut/engine/expected.hpp"
 #include "octocut/engine/io.hpp"
 #include "octocut/engine/scene_loader.hpp"
+#include "octocut/engine/tool.hpp"
 #include "octocut/engine/world.hpp"
 
 namespace {
 
 using namespace octocut;
 
+/// What `run` does with the scene's `expected` block after the run.
+enum class ExpectedMode { none, check, regenerate };
+
+/// Checks the report at `report_path` against the scene's `expected` block (as loaded, overrides included); prints
+/// one line per failure. Returns 1 when a check fails, 0 otherwise (also when the scene has no block).
+int check_report(const engine::Scene& scene, const std::string& report_path) {
+  if (scene.expected_json.empty()) {
+    std::printf("check: %s has no expected block; nothing to check\n", scene.file.c_str());
+    return 0;
+  }
+  const std::vector<std::string> failures =
+      engine::check_expected(scene.expected_json, engine::read_file(report_path));
+  for (const std::string& f : failures) std::fprintf(stderr, "octocut: check failed: %s\n", f.c_str());
+  const std::size_t total = engine::expected_check_count(scene.expected_json);
+  if (!failures.empty()) {
+    std::fprintf(stderr, "octocut: %zu of %zu expected checks failed\n", failures.size(), total);
+    return 1;
+  }
+  std::printf("check: all %zu expected checks passed\n", total);
+  return 0;
+}
+
+/// Rewrites the `expected` block of the scene file at `scene_path` with the values of the report at `report_path`,
+/// atomically, keeping every other byte of the file; then checks the new block. Returns 1 when a check still fails.
+int regenerate_report(const std::string& scene_path, const std::string& report_path) {
+  // The block as written in the file, members in their order (overrides are not written back).
+  const std::string text = engine::read_file(scene_path);
+  const std::string block = engine::expected_block_text(text);
+  if (block.empty()) {
+    std::printf("regenerate: %s has no expected block; add one with the report pointers to track\n",
+                scene_path.c_str());
+    return 0;
+  }
+  const std::string report = engine::read_file(report_path);
+  const std::string updated = engine::replace_expected_block(text, engine::regenerate_expected(block, report));
+  engine::write_file_atomic(scene_path, updated);
+  std::printf("regenerate: rewrote the expected block of %s\n", scene_path.c_str());
+  return check_report(engine::load_scene(scene_path), report_path);
+}
+
 int cmd_run(const std::string& scene_path, const std::vector<std::string>& sets, const std::string& out,
-            bool no_render, bool quiet) {
+            bool no_render, bool quiet, ExpectedMode expected) {
   const engine::Scene scene = engine::load_scene(scene_path, sets);
   engine::RunOptions o;
   o.out_dir = out;
@@ -28,9 +70,16 @@ int cmd_run(const std::string& scene_path, const std::vector<std::string>& sets,
   if (r.exit_code != 0) {
     std::fprintf(stderr, "octocut: %s\n", r.error.c_str());
     if (r.exit_code == 1) std::fprintf(stderr, "octocut: report written to %s\n", r.report_path.c_str());
+    // A failed run's report is still checked (its failures are worth seeing), but never becomes the reference.
+    if (r.exit_code == 1 && expected == ExpectedMode::check) check_report(scene, r.report_path);
+    if (r.exit_code == 1 && expected == ExpectedMode::regenerate) {
+      std::fprintf(stderr, "octocut: not regenerating the expected block from a failed run\n");
+    }
     return r.exit_code;
   }
   if (!quiet) std::printf("report: %s\n", r.report_path.c_str());
+  if (expected == ExpectedMode::check) return check_report(scene, r.report_path);
+  if (expected == ExpectedMode::regenerate) return regenerate_report(scene_path, r.report_path);
   return 0;
 }
 
@@ -43,6 +92,12 @@ int cmd_validate(const std::string& scene_path, const std::vector<std::string>& 
               scene_path.c_str(), m.num_elements(), m.num_dofs(), m.dofs().hanging_slots, o.surface.num_vertices(),
               o.surface.num_triangles(), o.graph ? o.graph->num_tets() : 0);
   if (!props.empty()) std::printf("%s: %zu render props loaded\n", scene_path.c_str(), props.size());
+  for (const engine::ToolSummary& t : engine::validate_tools(scene)) {
+    std::printf("tool %s: blade %s (%zu vertices, %zu triangles, %.6g m^3); mesh %zu triangles; %zu keyframes, "
+                "%zu cuts\n",
+                t.name.c_str(), t.blade.c_str(), t.blade_vertices, t.blade_triangles, t.blade_volume_m3,
+                t.mesh_triangles, t.keyframes, t.cuts);
+  }
   for (const std::string& w : o.warnings) std::printf("warning: %s\n", w.c_str());
   return 0;
 }
@@ -80,6 +135,15 @@ int main(int argc, char** argv) {
   run->add_option("--set", sets, "Override a scene key: /json/pointer=value (repeatable)");
   run->add_flag("--no-render", no_render, "Never start EGL, whatever the scene asks");
   run->add_flag("--quiet", quiet, "No progress line");
+  bool check = false, regenerate = false;
+  auto* check_flag = run->add_flag(
+      "--check", check,
+      "After the run, compare report.json with the scene's `expected` block; print each failed check and exit 1 "
+      "if any fails (a scene without the block passes with a note)");
+  run->add_flag("--regenerate", regenerate,
+                "After a successful run, rewrite the `expected` block of the scene file with the report's values "
+                "(same pointers and kinds of tolerance; atomic; the rest of the file is kept byte for byte)")
+      ->excludes(check_flag);
 
   auto* validate = app.add_subcommand("validate", "Load and check a scene, run nothing");
   validate->add_option("scene", scene_path, "Scene file (JSON)")->required();
@@ -117,7 +181,10 @@ int main(int argc, char** argv) {
   }
 
   try {
-    if (*run) return cmd_run(scene_path, sets, out, no_render, quiet);
+    if (*run) {
+      const ExpectedMode mode = check ? ExpectedMode::check : regenerate ? ExpectedMode::regenerate : ExpectedMode::none;
+      return cmd_run(scene_path, sets, out, no_render, quiet, mode);
+    }
     if (*validate) return cmd_validate(scene_path, sets);
     if (*bench && list) {
       for (const std::string& n : engine::benchmark_names()) std::printf("%s\n", n.c_str());

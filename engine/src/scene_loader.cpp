@@ -253,6 +253,72 @@ SceneBox to_box(const json& value, const std::string& pointer, const std::string
   return box;
 }
 
+/// Resolves the mesh path `value` against the scene file's directory and checks that the file exists.
+std::string resolve_mesh(const json& value, const std::string& pointer, const std::string& file) {
+  const std::filesystem::path resolved =
+      std::filesystem::absolute(std::filesystem::path(file).parent_path() / value.get<std::string>()).lexically_normal();
+  if (!std::filesystem::is_regular_file(resolved)) fail(file, pointer, "file not found: " + resolved.string());
+  return resolved.string();
+}
+
+/// Reads `tools[]`: names unique and not empty, mesh files present, keyframe and cut times strictly increasing,
+/// cuts within [0, duration].
+std::vector<ToolSettings> to_tools(const json& tools, double duration, const std::string& file) {
+  std::vector<ToolSettings> out;
+  std::set<std::string> names;
+  for (std::size_t i = 0; i < tools.size(); ++i) {
+    const json& tool = tools[i];
+    const std::string pointer = "/tools/" + std::to_string(i);
+    ToolSettings entry;
+
+    // Name, meshes, flags.
+    entry.name = tool["name"].get<std::string>();
+    if (entry.name.empty()) fail(file, pointer + "/name", "must not be empty");
+    if (!names.insert(entry.name).second) fail(file, pointer + "/name", "duplicate tool name \"" + entry.name + "\"");
+    if (tool.contains("mesh")) entry.mesh_path = resolve_mesh(tool["mesh"], pointer + "/mesh", file);
+    entry.scale = tool["scale"].get<double>();
+    const json& blade = tool["blade"];
+    entry.blade_is_cylinder = blade.is_object();
+    if (entry.blade_is_cylinder) {
+      const json& cylinder = blade["cylinder"];
+      entry.cylinder.radius = cylinder["radius"].get<double>();
+      entry.cylinder.height = cylinder["height"].get<double>();
+      entry.cylinder.segments = cylinder["segments"].get<int>();
+    } else {
+      entry.blade_path = resolve_mesh(blade, pointer + "/blade", file);
+    }
+    entry.collide = tool["collide"].get<bool>();
+
+    // Keyframes: strictly increasing times (the schema asks for at least one).
+    for (std::size_t k = 0; k < tool["keyframes"].size(); ++k) {
+      const json& keyframe = tool["keyframes"][k];
+      ToolKeyframe frame{keyframe["t"].get<double>(), to_vec3(keyframe["position"]), to_vec3(keyframe["rotation_deg"])};
+      if (k > 0 && !(frame.t > entry.keyframes.back().t)) {
+        fail(file, pointer + "/keyframes/" + std::to_string(k) + "/t",
+             "must be > the previous keyframe's t (" + format_number(entry.keyframes.back().t) + "), got " +
+                 format_number(frame.t));
+      }
+      entry.keyframes.push_back(frame);
+    }
+
+    // Cuts: strictly increasing times within the run.
+    for (std::size_t k = 0; k < tool["cuts"].size(); ++k) {
+      const ToolCut cut{tool["cuts"][k]["t"].get<double>()};
+      const std::string t_pointer = pointer + "/cuts/" + std::to_string(k) + "/t";
+      if (k > 0 && !(cut.t > entry.cuts.back().t)) {
+        fail(file, t_pointer,
+             "must be > the previous cut's t (" + format_number(entry.cuts.back().t) + "), got " + format_number(cut.t));
+      }
+      if (cut.t > duration) {
+        fail(file, t_pointer, "must be <= duration (" + format_number(duration) + "), got " + format_number(cut.t));
+      }
+      entry.cuts.push_back(cut);
+    }
+    out.push_back(std::move(entry));
+  }
+  return out;
+}
+
 /// Converts a validated document with defaults filled in to a Scene, checking the rules that span several keys.
 Scene to_scene(const json& document, const std::string& file) {
   Scene scene;
@@ -348,6 +414,13 @@ Scene to_scene(const json& document, const std::string& file) {
     settings.handles.push_back(std::move(handle));
   }
 
+  // Tools and cutting settings.
+  scene.tools = to_tools(document["tools"], scene.duration, file);
+  const json& cutting = document["cutting"];
+  scene.cutting.remove_fragments = cutting["remove_fragments"].get<std::string>();
+  scene.cutting.fragment_volume = cutting["fragment_volume"].get<double>();
+  scene.cutting.verify = cutting["verify"].get<bool>();
+
   // Probes: names unique and not empty.
   std::set<std::string> probe_names;
   for (std::size_t i = 0; i < document["probes"].size(); ++i) {
@@ -420,15 +493,21 @@ Scene to_scene(const json& document, const std::string& file) {
     }
     r.props.push_back(std::move(entry));
   }
-  // Until tools land (cutting issue), the camera can follow a prop.
-  if (!r.camera.follow_tool.empty() && !prop_names.count(r.camera.follow_tool))
+  // The camera follows a tool or, failing that, a prop.
+  if (!r.camera.follow_tool.empty() && !prop_names.count(r.camera.follow_tool) &&
+      std::none_of(scene.tools.begin(), scene.tools.end(),
+                   [&](const ToolSettings& tool) { return tool.name == r.camera.follow_tool; })) {
     fail(file, "/render/camera/follow_tool", "no tool or prop named \"" + r.camera.follow_tool + "\"");
+  }
   r.overlays.octree = render["overlays"]["octree"].get<bool>();
   r.overlays.dofs = render["overlays"]["dofs"].get<bool>();
   r.overlays.hanging = render["overlays"]["hanging"].get<bool>();
   scene.output.frames = document["output"]["frames"].get<bool>();
   scene.output.surface_final = document["output"]["surface_final"].get<bool>();
   scene.output.surface_every = document["output"]["surface_every"].get<int>();
+
+  // The expected block stays JSON text (validated by the schema); see expected.hpp.
+  if (document.contains("expected")) scene.expected_json = document["expected"].dump();
   return scene;
 }
 

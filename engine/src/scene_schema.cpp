@@ -9,6 +9,7 @@
 #include <sstream>
 #include <utility>
 
+#include "expected_shape.hpp"
 #include "octocut/engine/scene_loader.hpp"
 
 namespace octocut::engine {
@@ -211,12 +212,76 @@ Entry make_scene_schema() {
       },
       "The deformable object."));
 
+  // Tools: keyframed instruments with a blade and cut times (SPEC §4, §5).
+  Entry tool_keyframes = required(object_array(
+      "keyframes",
+      {required(number("t", std::nullopt, at_least(0), "Time, s; strictly increasing along the list.")),
+       vec3("position", std::array{0.0, 0.0, 0.0}, "Where the tool's origin is, world, m."),
+       vec3("rotation_deg", std::array{0.0, 0.0, 0.0},
+            "XYZ Euler angles of the tool frame (about fixed x, then y, then z, as render props), degrees.")},
+      "Pose over time, tool frame to world (x_world = R x_tool + position): position linear, rotation "
+      "spherical-linear between keyframes, held before the first and after the last."));
+  tool_keyframes.min_items = 1;
+  Entry tool_mesh = optional(string("mesh", "Render and contact mesh, drawn as metal: a closed triangle mesh file "
+                                            "(path relative to the scene file) in tool coordinates, times `scale`."));
+  tool_mesh.default_doc = "none";
+  Entry blade = required(box_or_path(
+      "blade",
+      {required(object(
+          "cylinder",
+          {required(number("radius", std::nullopt, greater_than(0), "Radius, m.")),
+           required(number("height", std::nullopt, greater_than(0),
+                           "Length along the tool's z axis, m; the cylinder spans z from -height/2 to height/2.")),
+           integer("segments", 32, closed(3, 1024), "Sides of the polygon that approximates the cross-section.")},
+          "A closed cylinder about the tool's z axis, centred on the tool origin, in metres (not scaled by "
+          "`scale`)."))},
+      "The volume a cut removes, in tool coordinates: a closed, oriented triangle mesh file free of "
+      "self-intersections (path relative to the scene file, times `scale`), or `{\"cylinder\": …}`."));
+  Entry tools = object_array(
+      "tools",
+      {required(string("name", "Tool name, unique and not empty; `render.camera.follow_tool` may name it.")),
+       std::move(tool_mesh),
+       number("scale", 1.0, greater_than(0),
+              "Factor from mesh and blade file coordinates to metres (0.001 for mm); a cylinder blade is in metres."),
+       std::move(blade),
+       boolean("collide", false,
+               "The tool takes part in rigid contact (Bullet) through its mesh, or its blade when it has no mesh."),
+       std::move(tool_keyframes),
+       object_array("cuts",
+                    {required(number("t", std::nullopt, at_least(0),
+                                     "Time of the cut, s; strictly increasing along the list, at most `duration`."))},
+                    "Cut events: at each time the blade, posed by the tool, is removed from the object in rest "
+                    "space (SPEC §4); none: the tool only moves (and collides).")},
+      "Keyframed instruments that cut the object.");
+
+  Entry cutting = object(
+      "cutting",
+      {choice("remove_fragments", {"all", "small", "none"}, "all",
+              "Material that a cut separates from every handle: `all` removes every such piece, `small` only pieces "
+              "below `fragment_volume`, `none` keeps them all (they move freely)."),
+       number("fragment_volume", 1e-9, greater_than(0),
+              "Volume below which a loose piece counts as small (with `remove_fragments` = `small`), m^3."),
+       boolean("verify", true,
+               "After each cut, check that the surface S is closed and free of self-intersections; a cut that "
+               "breaks it is undone and reported as skipped.")},
+      "How cuts are carried out.");
+
+  Entry expected = make_entry(
+      "expected", Type::checks,
+      "Regression checks for `octocut run --check`: each key is a JSON pointer into report.json (`/counts/elements`), "
+      "each value a check: a bare string, boolean or integer (equal), a bare number (equal within rel 1e-9), "
+      "`{\"value\": v, \"rel\": r, \"abs\": a}` (|x - v| <= max(a, r |v|); r, a >= 0, default 0) or "
+      "`{\"min\": a, \"max\": b}` (a <= x <= b, either bound optional). A pointer the report lacks fails. "
+      "`octocut run --regenerate` rewrites the values.");
+  expected.default_doc = "none";
+
   Entry position = optional(vec3("position", std::nullopt, "Eye position, m."));
   position.default_doc = "framed on the object";
   Entry target = optional(vec3("target", std::nullopt, "Point looked at, m."));
   target.default_doc = "the object's centre";
   Entry follow_tool = string("follow_tool", "Name of a tool (or render prop) whose tip, the origin of its frame, the camera "
-                                            "follows, keeping its offset; empty: a fixed camera.");
+                                            "follows, keeping its offset; a tool takes precedence over a prop of the "
+                                            "same name; empty: a fixed camera.");
   follow_tool.default_value = "";
   Entry render = object(
       "render",
@@ -264,6 +329,8 @@ Entry make_scene_schema() {
                     integer("seed", 0, at_least(0), "Seed for every random choice."),
                     std::move(solver),
                     std::move(object_entry),
+                    std::move(tools),
+                    std::move(cutting),
                     object_array("probes",
                                  {required(string("name", "Probe name, unique and not empty.")),
                                   required(vec3("point", std::nullopt, "Rest-space point, m."))},
@@ -278,6 +345,7 @@ Entry make_scene_schema() {
                                     "Write the deformed surface every N steps as `surfaces/surface_<step>.ply` "
                                     "(6 digits, binary PLY, metres), and the rest surface once; 0: never.")},
                            "Files the run writes besides the report."),
+                    std::move(expected),
                 },
                 "The scene document.");
 }
@@ -407,6 +475,8 @@ std::string type_text(const Entry& entry) {
       return "array of objects";
     case Type::box_or_path:
       return "string (mesh path) or object";
+    case Type::checks:
+      return "object (JSON pointer → check)";
   }
   return "";
 }
@@ -433,7 +503,10 @@ std::string default_text(const Entry& entry) {
 
 /// Appends one table row for `entry` at `pointer`, then rows for its children.
 void append_rows(std::ostringstream& out, const Entry& entry, const std::string& pointer) {
-  const std::string range = describe(entry.range);
+  std::string range = describe(entry.range);
+  if (entry.min_items > 0) {
+    range = "at least " + std::to_string(entry.min_items) + (entry.min_items == 1 ? " item" : " items");
+  }
   out << "| `" << cell(pointer) << "` | " << cell(type_text(entry)) << " | " << cell(range.empty() ? "—" : range)
       << " | " << cell(default_text(entry)) << " | " << cell(entry.doc) << " |\n";
   const std::string prefix = entry.type == Type::object_array ? join_pointer(pointer, "[]") : pointer;
@@ -484,6 +557,11 @@ void validate(json& value, const Entry& entry, const std::string& pointer, const
       return;
     case Type::object_array:
       if (!value.is_array()) fail(file, pointer, std::string("expected an array of objects, got ") + value.type_name());
+      if (value.size() < entry.min_items) {
+        fail(file, pointer,
+             "must have at least " + std::to_string(entry.min_items) + (entry.min_items == 1 ? " item" : " items") +
+                 ", got " + std::to_string(value.size()));
+      }
       for (std::size_t i = 0; i < value.size(); ++i) {
         validate_object(value[i], entry.children, join_pointer(pointer, i), file);
       }
@@ -494,6 +572,16 @@ void validate(json& value, const Entry& entry, const std::string& pointer, const
         fail(file, pointer, std::string("expected a mesh path (string) or an object, got ") + value.type_name());
       }
       validate_object(value, entry.children, pointer, file);
+      return;
+    case Type::checks:
+      if (!value.is_object()) {
+        fail(file, pointer, std::string("expected an object (JSON pointer -> check), got ") + value.type_name());
+      }
+      for (const auto& item : value.items()) {
+        if (const auto problem = expected_detail::member_problem(item.key(), item.value())) {
+          fail(file, join_pointer(pointer, item.key()) + problem->where, problem->what);
+        }
+      }
       return;
   }
 }

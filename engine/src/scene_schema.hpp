@@ -20,6 +20,7 @@ enum class Type {
   object,        ///< an object whose keys are `children`
   object_array,  ///< an array of objects whose keys are `children`
   box_or_path,   ///< a mesh path (string), or an object whose keys are `children`
+  checks,        ///< a free-form object: JSON pointer into report.json -> check (the `expected` block, expected.hpp)
 };
 
 /// Bounds on a number or integer. Each bound is optional and inclusive unless marked exclusive.
@@ -41,6 +42,7 @@ struct Entry {
   Range range;                                  ///< number, integer, and each element of a number_array
   std::vector<std::string> choices;             ///< enumeration
   std::size_t length = 0;                       ///< number_array
+  std::size_t min_items = 0;                    ///< object_array: fewest items allowed
   std::vector<Entry> children;  ///< object keys; keys of each object_array item; box_or_path's object form
 };
 

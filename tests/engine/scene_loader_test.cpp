@@ -378,6 +378,229 @@ TEST_F(SceneLoaderTest, ProbeNamesMustBeUnique) {
   EXPECT_EQ(error_of(path), path + ": /probes/1/name: duplicate probe name \"tip\"");
 }
 
+// ---- tools, cutting, expected -------------------------------------------------------------------------------------
+
+TEST_F(SceneLoaderTest, ToolsCuttingAndExpectedDefaults) {
+  const Scene scene = load_scene(write_scene(R"("tools": [{"name": "punch",
+      "blade": {"cylinder": {"radius": 0.001, "height": 0.01}}, "keyframes": [{"t": 0}]}])"));
+  const Scene defaults;
+  ASSERT_EQ(scene.tools.size(), 1u);
+  const ToolSettings& tool = scene.tools[0];
+  const ToolSettings tool_defaults;
+  EXPECT_EQ(tool.name, "punch");
+  EXPECT_TRUE(tool.mesh_path.empty());
+  EXPECT_EQ(tool.scale, tool_defaults.scale);
+  EXPECT_EQ(tool.scale, 1.0);
+  EXPECT_TRUE(tool.blade_is_cylinder);
+  EXPECT_EQ(tool.cylinder.radius, 0.001);
+  EXPECT_EQ(tool.cylinder.height, 0.01);
+  EXPECT_EQ(tool.cylinder.segments, CylinderBlade{}.segments);
+  EXPECT_EQ(tool.cylinder.segments, 32);
+  EXPECT_TRUE(tool.blade_path.empty());
+  EXPECT_EQ(tool.collide, tool_defaults.collide);
+  EXPECT_FALSE(tool.collide);
+  ASSERT_EQ(tool.keyframes.size(), 1u);
+  EXPECT_EQ(tool.keyframes[0].t, 0.0);
+  EXPECT_EQ(tool.keyframes[0].position, (std::array<double, 3>{0, 0, 0}));
+  EXPECT_EQ(tool.keyframes[0].rotation_deg, (std::array<double, 3>{0, 0, 0}));
+  EXPECT_TRUE(tool.cuts.empty());
+  // The schema's defaults agree with the struct's.
+  EXPECT_EQ(scene.cutting.remove_fragments, defaults.cutting.remove_fragments);
+  EXPECT_EQ(scene.cutting.remove_fragments, "all");
+  EXPECT_EQ(scene.cutting.fragment_volume, defaults.cutting.fragment_volume);
+  EXPECT_EQ(scene.cutting.fragment_volume, 1e-9);
+  EXPECT_EQ(scene.cutting.verify, defaults.cutting.verify);
+  EXPECT_TRUE(scene.cutting.verify);
+  EXPECT_TRUE(scene.expected_json.empty());
+  EXPECT_TRUE(load_scene(write("minimal.json", k_minimal_scene)).tools.empty());
+}
+
+TEST_F(SceneLoaderTest, ToolsCuttingAndExpectedAreReadIntoEveryField) {
+  write("meshes/blade.stl", "solid x\nendsolid x\n");
+  write("meshes/punch.obj", "v 0 0 0\n");
+  const std::string path = write("scenes/tools.json", R"({
+    "duration": 2,
+    "object": {"surface": {"box": {"min": [0, 0, 0], "max": [0.01, 0.01, 0.01]}}},
+    "tools": [
+      {"name": "punch", "mesh": "../meshes/punch.obj", "scale": 0.001, "blade": "../meshes/blade.stl",
+       "collide": true,
+       "keyframes": [{"t": 0, "position": [0.1, 0.2, 0.3], "rotation_deg": [10, 20, 30]}, {"t": 1.5}],
+       "cuts": [{"t": 0}, {"t": 0.5}, {"t": 2}]},
+      {"name": "probe", "blade": {"cylinder": {"radius": 0.002, "height": 0.03, "segments": 1024}},
+       "keyframes": [{"t": 0.25}]}
+    ],
+    "cutting": {"remove_fragments": "small", "fragment_volume": 2e-9, "verify": false},
+    "render": {"camera": {"follow_tool": "probe"}},
+    "expected": {"/status": "ok", "/counts/elements": {"min": 700, "max": 800},
+                 "/cuts/0/removed_volume_m3": {"value": 1e-7, "rel": 0.05, "abs": 1e-9}, "/steps": 10,
+                 "/stability/finite": true, "/a~1b": {"max": 1}}
+  })");
+  const Scene scene = load_scene(path);
+  ASSERT_EQ(scene.tools.size(), 2u);
+  const ToolSettings& punch = scene.tools[0];
+  EXPECT_EQ(punch.name, "punch");
+  EXPECT_EQ(punch.mesh_path, (m_dir / "meshes" / "punch.obj").string());
+  EXPECT_EQ(punch.scale, 0.001);
+  EXPECT_FALSE(punch.blade_is_cylinder);
+  EXPECT_EQ(punch.blade_path, (m_dir / "meshes" / "blade.stl").string());
+  EXPECT_TRUE(punch.collide);
+  ASSERT_EQ(punch.keyframes.size(), 2u);
+  EXPECT_EQ(punch.keyframes[0].position, (std::array<double, 3>{0.1, 0.2, 0.3}));
+  EXPECT_EQ(punch.keyframes[0].rotation_deg, (std::array<double, 3>{10, 20, 30}));
+  EXPECT_EQ(punch.keyframes[1].t, 1.5);
+  ASSERT_EQ(punch.cuts.size(), 3u);
+  EXPECT_EQ(punch.cuts[1].t, 0.5);
+  EXPECT_EQ(punch.cuts[2].t, 2.0);
+  const ToolSettings& probe = scene.tools[1];
+  EXPECT_TRUE(probe.blade_is_cylinder);
+  EXPECT_EQ(probe.cylinder.radius, 0.002);
+  EXPECT_EQ(probe.cylinder.height, 0.03);
+  EXPECT_EQ(probe.cylinder.segments, 1024);
+  EXPECT_EQ(probe.keyframes[0].t, 0.25);
+  EXPECT_EQ(scene.cutting.remove_fragments, "small");
+  EXPECT_EQ(scene.cutting.fragment_volume, 2e-9);
+  EXPECT_FALSE(scene.cutting.verify);
+  EXPECT_EQ(scene.render.camera.follow_tool, "probe");
+  // The block is kept as compact JSON text with its keys sorted.
+  EXPECT_EQ(scene.expected_json,
+            R"({"/a~1b":{"max":1},"/counts/elements":{"max":800,"min":700},)"
+            R"("/cuts/0/removed_volume_m3":{"abs":1e-09,"rel":0.05,"value":1e-07},"/stability/finite":true,)"
+            R"("/status":"ok","/steps":10})");
+}
+
+TEST_F(SceneLoaderTest, ToolErrorsNameThePointer) {
+  const std::string path = (m_dir / "scene.json").string();
+  const std::string cylinder = R"("blade": {"cylinder": {"radius": 0.001, "height": 0.01}})";
+  const auto tools = [&](const std::string& items) { return error_of(write_scene(R"("tools": [)" + items + "]")); };
+  // Required keys, and at least one keyframe.
+  EXPECT_EQ(tools(R"({"blade": "b.ply", "keyframes": [{"t": 0}]})"), path + ": /tools/0/name: required key missing");
+  EXPECT_EQ(tools(R"({"name": "p", "keyframes": [{"t": 0}]})"), path + ": /tools/0/blade: required key missing");
+  EXPECT_EQ(tools(R"({"name": "p", )" + cylinder + "}"), path + ": /tools/0/keyframes: required key missing");
+  EXPECT_EQ(tools(R"({"name": "p", )" + cylinder + R"(, "keyframes": []})"),
+            path + ": /tools/0/keyframes: must have at least 1 item, got 0");
+  EXPECT_EQ(tools(R"({"name": "p", )" + cylinder + R"(, "keyframes": [{"position": [0, 0, 0]}]})"),
+            path + ": /tools/0/keyframes/0/t: required key missing");
+  // Blade shapes and ranges.
+  EXPECT_EQ(tools(R"({"name": "p", "blade": {}, "keyframes": [{"t": 0}]})"),
+            path + ": /tools/0/blade/cylinder: required key missing");
+  EXPECT_EQ(tools(R"({"name": "p", "blade": {"sphere": {}}, "keyframes": [{"t": 0}]})"),
+            path + ": /tools/0/blade/sphere: unknown key");
+  EXPECT_EQ(tools(R"({"name": "p", "blade": 3, "keyframes": [{"t": 0}]})"),
+            path + ": /tools/0/blade: expected a mesh path (string) or an object, got number");
+  EXPECT_EQ(tools(R"({"name": "p", "blade": {"cylinder": {"radius": 0, "height": 1}}, "keyframes": [{"t": 0}]})"),
+            path + ": /tools/0/blade/cylinder/radius: must be > 0, got 0");
+  EXPECT_EQ(tools(R"({"name": "p", "blade": {"cylinder": {"radius": 1, "height": -1}}, "keyframes": [{"t": 0}]})"),
+            path + ": /tools/0/blade/cylinder/height: must be > 0, got -1");
+  EXPECT_EQ(tools(R"({"name": "p", "blade": {"cylinder": {"radius": 1}}, "keyframes": [{"t": 0}]})"),
+            path + ": /tools/0/blade/cylinder/height: required key missing");
+  EXPECT_EQ(tools(R"({"name": "p", "blade": {"cylinder": {"radius": 1, "height": 1, "segments": 2}},
+                      "keyframes": [{"t": 0}]})"),
+            path + ": /tools/0/blade/cylinder/segments: must be >= 3, got 2");
+  EXPECT_EQ(tools(R"({"name": "p", "blade": {"cylinder": {"radius": 1, "height": 1, "segments": 1025}},
+                      "keyframes": [{"t": 0}]})"),
+            path + ": /tools/0/blade/cylinder/segments: must be <= 1024, got 1025");
+  EXPECT_EQ(tools(R"({"name": "p", "blade": {"cylinder": {"radius": 1, "height": 1, "segments": 3.5}},
+                      "keyframes": [{"t": 0}]})"),
+            path + ": /tools/0/blade/cylinder/segments: expected an integer, got 3.5");
+  EXPECT_EQ(tools(R"({"name": "p", "blade": "absent.ply", "keyframes": [{"t": 0}]})"),
+            path + ": /tools/0/blade: file not found: " + (m_dir / "absent.ply").string());
+  EXPECT_EQ(tools(R"({"name": "p", "mesh": "absent.obj", )" + cylinder + R"(, "keyframes": [{"t": 0}]})"),
+            path + ": /tools/0/mesh: file not found: " + (m_dir / "absent.obj").string());
+  EXPECT_EQ(tools(R"({"name": "p", "mesh": 1, )" + cylinder + R"(, "keyframes": [{"t": 0}]})"),
+            path + ": /tools/0/mesh: expected a string, got number");
+  // Other keys' types and ranges.
+  EXPECT_EQ(tools(R"({"name": "p", "scale": 0, )" + cylinder + R"(, "keyframes": [{"t": 0}]})"),
+            path + ": /tools/0/scale: must be > 0, got 0");
+  EXPECT_EQ(tools(R"({"name": "p", "collide": "yes", )" + cylinder + R"(, "keyframes": [{"t": 0}]})"),
+            path + ": /tools/0/collide: expected a boolean, got string");
+  EXPECT_EQ(tools(R"({"name": "p", "knife": 1, )" + cylinder + R"(, "keyframes": [{"t": 0}]})"),
+            path + ": /tools/0/knife: unknown key");
+  EXPECT_EQ(tools(R"({"name": "p", )" + cylinder + R"(, "keyframes": [{"t": -1}]})"),
+            path + ": /tools/0/keyframes/0/t: must be >= 0, got -1");
+  EXPECT_EQ(tools(R"({"name": "p", )" + cylinder + R"(, "keyframes": [{"t": 0, "position": [0, 0]}]})"),
+            path + ": /tools/0/keyframes/0/position: expected 3 numbers, got an array of 2");
+  EXPECT_EQ(tools(R"({"name": "p", )" + cylinder + R"(, "keyframes": [{"t": 0}], "cuts": [{"t": -0.5}]})"),
+            path + ": /tools/0/cuts/0/t: must be >= 0, got -0.5");
+  EXPECT_EQ(tools(R"({"name": "p", )" + cylinder + R"(, "keyframes": [{"t": 0}], "cuts": [{}]})"),
+            path + ": /tools/0/cuts/0/t: required key missing");
+  // Rules across keys: names, sorted times, cuts within the duration.
+  EXPECT_EQ(tools(R"({"name": "", )" + cylinder + R"(, "keyframes": [{"t": 0}]})"),
+            path + ": /tools/0/name: must not be empty");
+  EXPECT_EQ(tools(R"({"name": "p", )" + cylinder + R"(, "keyframes": [{"t": 0}]}, {"name": "p", )" + cylinder +
+                  R"(, "keyframes": [{"t": 0}]})"),
+            path + ": /tools/1/name: duplicate tool name \"p\"");
+  EXPECT_EQ(tools(R"({"name": "p", )" + cylinder + R"(, "keyframes": [{"t": 0.5}, {"t": 0.5}]})"),
+            path + ": /tools/0/keyframes/1/t: must be > the previous keyframe's t (0.5), got 0.5");
+  EXPECT_EQ(tools(R"({"name": "p", )" + cylinder + R"(, "keyframes": [{"t": 0}], "cuts": [{"t": 0.5}, {"t": 0.2}]})"),
+            path + ": /tools/0/cuts/1/t: must be > the previous cut's t (0.5), got 0.2");
+  EXPECT_EQ(tools(R"({"name": "p", )" + cylinder + R"(, "keyframes": [{"t": 0}], "cuts": [{"t": 1.5}]})"),
+            path + ": /tools/0/cuts/0/t: must be <= duration (1), got 1.5");
+  EXPECT_EQ(error_of(write_scene(R"("tools": {})")), path + ": /tools: expected an array of objects, got object");
+}
+
+TEST_F(SceneLoaderTest, CuttingErrorsNameThePointer) {
+  const std::string path = (m_dir / "scene.json").string();
+  EXPECT_EQ(error_of(write_scene(R"("cutting": {"remove_fragments": "some"})")),
+            path + R"(: /cutting/remove_fragments: must be one of "all", "small", "none", got "some")");
+  EXPECT_EQ(error_of(write_scene(R"("cutting": {"fragment_volume": 0})")),
+            path + ": /cutting/fragment_volume: must be > 0, got 0");
+  EXPECT_EQ(error_of(write_scene(R"("cutting": {"verify": 1})")),
+            path + ": /cutting/verify: expected a boolean, got number");
+  EXPECT_EQ(error_of(write_scene(R"("cutting": {"verfy": true})")), path + ": /cutting/verfy: unknown key");
+  EXPECT_EQ(error_of(write_scene(R"("cutting": [])")), path + ": /cutting: expected an object, got array");
+}
+
+TEST_F(SceneLoaderTest, FollowToolNamesAToolOrAProp) {
+  const std::string path = (m_dir / "scene.json").string();
+  EXPECT_EQ(error_of(write_scene(R"("render": {"camera": {"follow_tool": "punch"}})")),
+            path + ": /render/camera/follow_tool: no tool or prop named \"punch\"");
+  EXPECT_EQ(error_of(write_scene(R"("render": {"camera": {"follow_tool": "punch"}}, "tools": [{"name": "probe",
+      "blade": {"cylinder": {"radius": 1, "height": 1}}, "keyframes": [{"t": 0}]}])")),
+            path + ": /render/camera/follow_tool: no tool or prop named \"punch\"");
+  write("shaft.obj", "v 0 0 0\n");
+  EXPECT_EQ(load_scene(write_scene(R"("render": {"camera": {"follow_tool": "shaft"},
+                                                   "props": [{"name": "shaft", "mesh": "shaft.obj"}]})"))
+                .render.camera.follow_tool,
+            "shaft");
+}
+
+TEST_F(SceneLoaderTest, ExpectedBlockShapeErrorsNameThePointer) {
+  const std::string path = (m_dir / "scene.json").string();
+  const auto expected = [&](const std::string& block) { return error_of(write_scene(R"("expected": )" + block)); };
+  EXPECT_EQ(expected("[]"), path + ": /expected: expected an object (JSON pointer -> check), got array");
+  EXPECT_EQ(expected(R"({"counts/elements": 1})"),
+            path + ": /expected/counts~1elements: key must be a JSON pointer into report.json starting with '/'");
+  EXPECT_EQ(expected(R"({"": 1})"),
+            path + ": /expected/: key must be a JSON pointer into report.json starting with '/'");
+  EXPECT_EQ(expected(R"({"/a~2": 1})"),
+            path + ": /expected/~1a~02: key is not a JSON pointer: '~' must be followed by '0' or '1'");
+  EXPECT_EQ(expected(R"({"/a": null})"),
+            path + ": /expected/~1a: expected a string, boolean, number, {\"value\", \"rel\", \"abs\"} or "
+                   "{\"min\", \"max\"}, got null");
+  EXPECT_EQ(expected(R"({"/a": [1, 2]})"),
+            path + ": /expected/~1a: expected a string, boolean, number, {\"value\", \"rel\", \"abs\"} or "
+                   "{\"min\", \"max\"}, got array");
+  EXPECT_EQ(expected(R"({"/a": {"value": 1, "tol": 2}})"),
+            path + ": /expected/~1a/tol: unknown key (expected value, rel, abs, min or max)");
+  EXPECT_EQ(expected(R"({"/a": {"value": "x"}})"), path + ": /expected/~1a/value: expected a number, got string");
+  EXPECT_EQ(expected(R"({"/a": {"value": 1, "rel": -0.1}})"), path + ": /expected/~1a/rel: must be >= 0, got -0.1");
+  EXPECT_EQ(expected(R"({"/a": {"value": 1, "abs": -1}})"), path + ": /expected/~1a/abs: must be >= 0, got -1");
+  EXPECT_EQ(expected(R"({"/a": {"rel": 0.1}})"), path + ": /expected/~1a: needs \"value\", or \"min\" and/or \"max\"");
+  EXPECT_EQ(expected(R"({"/a": {}})"), path + ": /expected/~1a: needs \"value\", or \"min\" and/or \"max\"");
+  EXPECT_EQ(expected(R"({"/a": {"value": 1, "max": 2}})"),
+            path + ": /expected/~1a/max: cannot be combined with \"value\"");
+  EXPECT_EQ(expected(R"({"/a": {"min": 1, "abs": 2}})"),
+            path + ": /expected/~1a/abs: only goes with \"value\", not with min/max");
+  EXPECT_EQ(expected(R"({"/a": {"min": 3, "max": 2}})"), path + ": /expected/~1a/max: must be >= min (3), got 2");
+  EXPECT_EQ(error_of(write_scene(R"("expected": {"/a": 1})"), {"/expected/~1a=1e999"}),
+            path + ": /expected/~1a: must be a finite number, got inf");
+  // A valid block, and one built from overrides.
+  EXPECT_EQ(load_scene(write_scene(R"("expected": {"/a": {"min": 1}, "/b": "x", "/c": false, "/d": 1.5})")).expected_json,
+            R"({"/a":{"min":1},"/b":"x","/c":false,"/d":1.5})");
+  EXPECT_EQ(load_scene(write("minimal.json", k_minimal_scene), {"/expected={\"/steps\": 3}"}).expected_json,
+            R"({"/steps":3})");
+}
+
 // ---- overrides ------------------------------------------------------------------------------------------------------
 
 TEST_F(SceneLoaderTest, OverridesReplaceAndCreateKeys) {
@@ -441,10 +664,15 @@ TEST(SceneFormatDocs, EveryKeyHasARow) {
   const std::string markdown = scene_format_markdown();
   for (const char* key : {"`/name`", "`/solver/dt`", "`/object/surface/box/min`", "`/object/octree/root/size`",
                           "`/object/octree/refine/[]/level`", "`/object/handles/[]/keyframes/[]/rotation_deg`",
-                          "`/probes/[]/point`", "`/output/surface_every`"}) {
+                          "`/probes/[]/point`", "`/output/surface_every`", "`/tools/[]/blade/cylinder/segments`",
+                          "`/tools/[]/keyframes/[]/rotation_deg`", "`/tools/[]/cuts/[]/t`", "`/tools/[]/collide`",
+                          "`/cutting/remove_fragments`", "`/cutting/fragment_volume`", "`/cutting/verify`",
+                          "`/expected`"}) {
     EXPECT_NE(markdown.find(std::string("| ") + key + " |"), std::string::npos) << key;
   }
   EXPECT_NE(markdown.find("| `/solver/dt` | number | (0, 1] | `0.001` | Time step, s. |"), std::string::npos);
+  EXPECT_NE(markdown.find("| `/tools/[]/keyframes` | array of objects | at least 1 item | required |"), std::string::npos);
+  EXPECT_NE(markdown.find("| `/cutting/fragment_volume` | number | > 0 | `1e-09` |"), std::string::npos);
 }
 
 }  // namespace

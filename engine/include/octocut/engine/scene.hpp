@@ -94,7 +94,7 @@ struct CameraSettings {
   double fov_deg = 45.0;                   ///< vertical field of view, degrees
   bool arthroscope = false;                ///< a light at the lens
   bool mask = false;                       ///< circular arthroscope mask
-  std::string follow_tool;                 ///< name of the tool the camera follows; empty: fixed
+  std::string follow_tool;                 ///< name of the tool (or else render prop) the camera follows; empty: fixed
 };
 
 /// Debug overlays drawn over the tissue (`render/overlays`).
@@ -140,6 +140,46 @@ struct OutputSettings {
   int surface_every = 0;
 };
 
+/// One keyframe of a tool's pose: where the tool frame is at time t.
+struct ToolKeyframe {
+  double t = 0.0;                        ///< time, s
+  std::array<double, 3> position{};      ///< where the tool's origin is, world, m (3)
+  std::array<double, 3> rotation_deg{};  ///< XYZ Euler angles of the tool frame (fixed axes, as props), degrees (3)
+};
+
+/// A cylindrical blade in tool coordinates: axis z, centred on the tool origin (`tools[]/blade/cylinder`).
+struct CylinderBlade {
+  double radius = 0.0;  ///< m, > 0
+  double height = 0.0;  ///< along z, from -height/2 to +height/2, m, > 0
+  int segments = 32;    ///< sides of the polygonal cross-section, [3, 1024]
+};
+
+/// One cut event of a tool (`tools[]/cuts[]`): at time t the blade, posed by the tool, is subtracted.
+struct ToolCut {
+  double t = 0.0;  ///< time, s, in [0, duration]
+};
+
+/// A keyframed instrument (`tools[]`): an optional render/contact mesh and a blade, both in tool coordinates, posed
+/// by `keyframes` (tool frame to world: x_world = R x_tool + position).
+struct ToolSettings {
+  std::string name;                     ///< unique, not empty
+  std::string mesh_path;                ///< absolute path of the render/contact mesh; empty: none
+  double scale = 1.0;                   ///< multiplies mesh and blade file coordinates to get metres
+  bool blade_is_cylinder = false;       ///< true: `cylinder`; false: the mesh file `blade_path`
+  CylinderBlade cylinder;               ///< when blade_is_cylinder, m (not scaled by `scale`)
+  std::string blade_path;               ///< absolute path of the blade mesh when !blade_is_cylinder
+  bool collide = false;                 ///< the mesh takes part in rigid contact (Bullet)
+  std::vector<ToolKeyframe> keyframes;  ///< sorted by t, strictly increasing, at least one
+  std::vector<ToolCut> cuts;            ///< sorted by t, strictly increasing, each in [0, duration]
+};
+
+/// How cuts are carried out (`cutting`).
+struct CuttingSettings {
+  std::string remove_fragments = "all";  ///< "all" | "small" | "none": which pieces cut loose from every handle go
+  double fragment_volume = 1e-9;         ///< with "small": pieces below this volume are removed, m^3
+  bool verify = true;                    ///< check S after each cut: closed, free of self-intersections
+};
+
 /// A fully validated scene with defaults filled in.
 struct Scene {
   std::string file;        ///< the scene file path as given
@@ -148,9 +188,14 @@ struct Scene {
   std::uint64_t seed = 0;
   SolverSettings solver;
   ObjectSettings object;
+  std::vector<ToolSettings> tools;  ///< keyframed instruments, in file order
+  CuttingSettings cutting;
   std::vector<Probe> probes;
   RenderSettings render;
   OutputSettings output;
+  /// The `expected` block as compact JSON text (an object: JSON pointer into report.json -> check), keys sorted;
+  /// empty when the scene has none. See expected.hpp.
+  std::string expected_json;
 };
 
 }  // namespace octocut::engine

@@ -75,7 +75,8 @@ std::vector<int> match_leaves(const Octree& old_tree, const Octree& tree, std::v
 
 // Nearest-leaf search for fallback vertices: a uniform grid of G^3 buckets over the root, each listing the leaves
 // whose box overlaps it, searched ring by ring around the point. Gives exactly the brute-force answer of
-// embed_vertex (same distance function, same tie-break) at a cost independent of the number of leaves far away.
+// embed_vertex (same distance function, same tie-break) at a cost independent of the number of leaves far away;
+// restricted to one material component, it gives the brute-force answer over that component's leaves.
 class NearestLeafGrid {
  public:
   NearestLeafGrid(const Octree& tree, const RootGeometry& root) : m_tree(tree), m_root(root) {
@@ -115,8 +116,10 @@ class NearestLeafGrid {
     }
   }
 
-  // The leaf nearest to p (distance to the leaf box), the lowest index among equals.
-  [[nodiscard]] int nearest(const Vec3& p) const {
+  // The leaf nearest to p (distance to the leaf box), the lowest index among equals. With `component` >= 0 only the
+  // leaves l with leaf_component[l] == component count (leaf_component: one entry per leaf; unused when component
+  // is -1); -1 when no leaf qualifies.
+  [[nodiscard]] int nearest(const Vec3& p, int component = -1, std::span<const int> leaf_component = {}) const {
     // Start from the bucket of p clamped into the root; buckets on ring r + 1 are at least r bucket edges away.
     const double edge = m_root.size / m_g;
     const Vec3 g = ((p - m_root.min) / edge).cwiseMax(0.0).cwiseMin(double(m_g) - 0.5);
@@ -135,6 +138,7 @@ class NearestLeafGrid {
             const std::size_t b = bucket(x, y, z);
             for (int i = m_begin[b]; i < m_begin[b + 1]; ++i) {
               const int l = m_leaf[std::size_t(i)];
+              if (component >= 0 && leaf_component[std::size_t(l)] != component) continue;
               const double d = box_distance2(m_root.cell_box(m_tree.leaf(l)), p);
               if (d < best || (d == best && l < best_leaf)) {
                 best = d;
@@ -158,6 +162,105 @@ class NearestLeafGrid {
   std::vector<int> m_begin;    ///< CSR row starts (G^3 + 1)
   std::vector<int> m_leaf;     ///< leaves overlapping each bucket, ascending (nnz)
 };
+
+// Material components of the elements: two leaves belong to one component when they share a DOF, i.e. when some
+// slot of each reaches that DOF through P (hanging slots included, since a hard binding only links connected
+// leaves). Union-find over the DOFs, the lower root winning; components are numbered 0, 1, ... in the order of
+// their lowest leaf. Returns one component per leaf (num_leaves). Cost: one pass over nnz(P).
+std::vector<int> element_components(const DofMap& P, int num_leaves) {
+  std::vector<int> parent(std::size_t(P.num_dofs));
+  std::iota(parent.begin(), parent.end(), 0);
+  auto find = [&](int d) {
+    while (parent[std::size_t(d)] != d) {
+      parent[std::size_t(d)] = parent[std::size_t(parent[std::size_t(d)])];
+      d = parent[std::size_t(d)];
+    }
+    return d;
+  };
+  // Join every DOF a leaf reaches with the leaf's first one.
+  for (int l = 0; l < num_leaves; ++l) {
+    const int begin = P.slot_begin[8 * std::size_t(l)], end = P.slot_begin[8 * std::size_t(l) + 8];
+    if (begin == end) continue;
+    int root = find(P.slot_dof[std::size_t(begin)]);
+    for (int i = begin + 1; i < end; ++i) {
+      const int r = find(P.slot_dof[std::size_t(i)]);
+      if (r == root) continue;
+      parent[std::size_t(std::max(r, root))] = std::min(r, root);
+      root = std::min(r, root);
+    }
+  }
+  // Number the roots in leaf order; a leaf that reaches no DOF (never, by the invariants of SPEC §2.3) is alone.
+  std::vector<int> label(std::size_t(P.num_dofs), -1), component(std::size_t(num_leaves), -1);
+  int next = 0;
+  for (int l = 0; l < num_leaves; ++l) {
+    const int begin = P.slot_begin[8 * std::size_t(l)], end = P.slot_begin[8 * std::size_t(l) + 8];
+    if (begin == end) {
+      component[std::size_t(l)] = next++;
+      continue;
+    }
+    int& c = label[std::size_t(find(P.slot_dof[std::size_t(begin)]))];
+    if (c < 0) c = next++;
+    component[std::size_t(l)] = c;
+  }
+  return component;
+}
+
+// True when leaves a and b are the same leaf or some slot of each reaches the same DOF through P (then they are in
+// one material component). At most 8 x 8 short rows compared.
+bool leaves_share_dof(const DofMap& P, int a, int b) {
+  if (a == b) return true;
+  const int a0 = P.slot_begin[8 * std::size_t(a)], a1 = P.slot_begin[8 * std::size_t(a) + 8];
+  const int b0 = P.slot_begin[8 * std::size_t(b)], b1 = P.slot_begin[8 * std::size_t(b) + 8];
+  for (int i = a0; i < a1; ++i)
+    for (int j = b0; j < b1; ++j)
+      if (P.slot_dof[std::size_t(i)] == P.slot_dof[std::size_t(j)]) return true;
+  return false;
+}
+
+// The anchor of each fallback vertex: the nearest regularly bound vertex of its surface component along triangle
+// edges (fewest edges, the lowest vertex index among equals), or -1 when the component has none. `embedding` (|V|)
+// marks the fallback vertices by leaf -1 and the regular ones by their leaf; `lost` lists the fallback vertices;
+// `tri_begin`, `tri` are the vertex-to-triangle CSR of `triangles`. Returns one anchor per vertex (|V|), -1 for the
+// regular vertices. A breadth-first search from all regular vertices at once, layer by layer through fallback
+// vertices only: the nearest regular vertices of a vertex at depth d + 1 are the union of those of its neighbours at
+// depth d, so keeping the lowest anchor among those neighbours gives the tie-break exactly. Cost: the triangles
+// around the fallback vertices, independent of |V| beyond one array fill.
+std::vector<int> fallback_anchors(std::span<const VertexEmbedding> embedding, std::span<const std::size_t> lost,
+                                  std::span<const int> tri_begin, std::span<const int> tri,
+                                  std::span<const std::array<int32_t, 3>> triangles) {
+  std::vector<int> anchor(embedding.size(), -1), depth(embedding.size(), -1);
+  std::vector<std::size_t> frontier, next;
+  // Depth 1: fallback vertices with a regular neighbour take the lowest one.
+  for (const std::size_t v : lost) {
+    int best = -1;
+    for (int i = tri_begin[v]; i < tri_begin[v + 1]; ++i)
+      for (const int32_t u : triangles[std::size_t(tri[std::size_t(i)])])
+        if (embedding[std::size_t(u)].leaf >= 0 && (best < 0 || u < best)) best = u;
+    if (best < 0) continue;
+    anchor[v] = best;
+    depth[v] = 1;
+    frontier.push_back(v);
+  }
+  // Depth d + 1: unreached fallback neighbours of depth-d vertices take the lowest anchor among those neighbours.
+  for (int d = 1; !frontier.empty(); ++d) {
+    next.clear();
+    for (const std::size_t v : frontier)
+      for (int i = tri_begin[v]; i < tri_begin[v + 1]; ++i)
+        for (const int32_t u32 : triangles[std::size_t(tri[std::size_t(i)])]) {
+          const std::size_t u = std::size_t(u32);
+          if (embedding[u].leaf >= 0) continue;
+          if (depth[u] < 0) {
+            depth[u] = d + 1;
+            anchor[u] = anchor[v];
+            next.push_back(u);
+          } else if (depth[u] == d + 1 && anchor[v] < anchor[u]) {
+            anchor[u] = anchor[v];
+          }
+        }
+    frontier.swap(next);
+  }
+  return anchor;
+}
 
 // Fallback embedding of p in `leaf`: extrapolated trilinear weights, projected into the allowed range.
 VertexEmbedding fallback_embedding(const Octree& tree, const RootGeometry& root, int leaf, const Vec3& p);
@@ -352,9 +455,9 @@ SurfaceEmbedding::SurfaceEmbedding(const ObjectModel& model, std::vector<Vec3> r
   check_triangles(m_triangles, m_rest.size());
   m_zcurve = ZCurveList(m_root, m_rest);
   m_embedding.assign(m_rest.size(), VertexEmbedding{});
+  build_adjacency();
   embed_and_compose(model, {});
   m_last_reembedded = num_vertices();
-  build_adjacency();
 }
 
 std::span<const ZEntry> SurfaceEmbedding::vertices_in_leaf(int leaf) const {
@@ -388,11 +491,28 @@ void SurfaceEmbedding::embed_and_compose(const ObjectModel& model, const std::ve
     m_embedding[v] = regular_embedding(m_tree, m_root, m_rest[v]);
     if (m_embedding[v].leaf < 0) lost.push_back(v);
   }
-  // The fallback vertices go to the nearest leaf, found on a bucket grid built once for all of them.
+  // The fallback vertices go to the nearest leaf of their anchor's material component (the plain nearest leaf when
+  // their surface component has no regular vertex), found on a bucket grid built once for all of them. Every
+  // vertex not in `lost` is regular here (update() re-embeds all fallback vertices), and m_tri matches m_triangles.
   if (!lost.empty()) {
     const NearestLeafGrid grid(m_tree, m_root);
-    for (const std::size_t v : lost)
-      m_embedding[v] = fallback_embedding(m_tree, m_root, grid.nearest(m_rest[v]), m_rest[v]);
+    const std::vector<int> anchor = fallback_anchors(m_embedding, lost, m_tri_begin, m_tri, m_triangles);
+    std::vector<int> component;  // per leaf, computed on first need (one pass over P)
+    for (const std::size_t v : lost) {
+      // The plain nearest leaf is the answer when it lies in the anchor's component (it is then also the nearest
+      // there, with the same tie-break). Sharing a DOF with the anchor's leaf proves that without the global pass.
+      int leaf = grid.nearest(m_rest[v]);
+      const int a = anchor[v];
+      if (a >= 0) {
+        const int home = m_embedding[std::size_t(a)].leaf;
+        if (!leaves_share_dof(model.dofs(), leaf, home)) {
+          if (component.empty()) component = element_components(model.dofs(), m_tree.size());
+          const int c = component[std::size_t(home)];
+          if (component[std::size_t(leaf)] != c) leaf = grid.nearest(m_rest[v], c, component);
+        }
+      }
+      m_embedding[v] = fallback_embedding(m_tree, m_root, leaf, m_rest[v]);
+    }
   }
 
   // Compose through P: vertex v = sum_k w_k (P x)_(8 leaf + k), entries of one DOF summed in slot order.
@@ -502,6 +622,7 @@ std::vector<int> SurfaceEmbedding::update(const ObjectModel& new_model, const Su
   // Validate everything before touching any member, so that a bad edit leaves the embedding as it was.
   if (new_model.root().min != m_root.min || new_model.root().size != m_root.size)
     throw std::invalid_argument("SurfaceEmbedding::update: the new model has another root cube");
+  if (new_model.tree().size() == 0) throw std::invalid_argument("SurfaceEmbedding::update: the new model has no leaf");
   check_index_list(edit.removed_vertices, m_rest.size(), "removed_vertices");
   check_finite(edit.inserted_rest, "inserted vertex");
   const std::size_t nv_new = m_rest.size() - edit.removed_vertices.size() + edit.inserted_rest.size();
@@ -560,9 +681,9 @@ std::vector<int> SurfaceEmbedding::update(const ObjectModel& new_model, const Su
   m_embedding = std::move(embedding);
   m_triangles = edit.triangles;
   if (!same_tree) m_tree = new_model.tree();
+  build_adjacency();
   embed_and_compose(new_model, redo);
   m_last_reembedded = int(std::count(redo.begin(), redo.end(), char(1)));
-  build_adjacency();
   return map;
 }
 

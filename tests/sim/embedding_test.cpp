@@ -1,10 +1,12 @@
 // The Z-curve surface embedding (SPEC §2.4, paper §4.5) against independent truths: brute-force Morton codes and
 // range queries, exact reproduction of rest and affine fields (with hanging nodes), analytic normals of an affinely
-// deformed closed mesh, the fallback rule, and incremental updates against a rebuild from scratch.
+// deformed closed mesh, the fallback rule (with material components: brute-force scans over the leaves of one
+// block), and incremental updates against a rebuild from scratch.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <random>
 #include <set>
@@ -247,6 +249,289 @@ TEST(SurfaceEmbedding, FallbackSearchMatchesTheBruteForceScan) {
   EXPECT_GT(e.num_fallback(), 1000);
   for (std::size_t v = 0; v < pts.size(); ++v)
     EXPECT_EQ(e.embeddings()[v], embed_vertex(m.tree(), m.root(), pts[v])) << "point " << v;
+}
+
+// ---- The fallback rule respects material components (SPEC §2.4) -----------------------------------------------------
+
+// A closed axis-aligned box [lo, hi] (m) with n quads per edge, welded, counter-clockwise seen from outside.
+TriMesh box_surface(const Vec3& lo, const Vec3& hi, int n) {
+  TriMesh m;
+  std::vector<int> id(std::size_t((n + 1) * (n + 1) * (n + 1)), -1);
+  auto at = [&](int i, int j, int k) -> int& { return id[std::size_t((k * (n + 1) + j) * (n + 1) + i)]; };
+  for (int k = 0; k <= n; ++k)
+    for (int j = 0; j <= n; ++j)
+      for (int i = 0; i <= n; ++i) {
+        if (i != 0 && i != n && j != 0 && j != n && k != 0 && k != n) continue;
+        at(i, j, k) = int(m.vertices.size());
+        // Exact lo and hi on the faces, so that tests can find a face's vertices by equality.
+        const int idx[3] = {i, j, k};
+        Vec3 p;
+        for (int d = 0; d < 3; ++d)
+          p[d] = idx[d] == 0 ? lo[d] : idx[d] == n ? hi[d] : lo[d] + (hi[d] - lo[d]) * idx[d] / n;
+        m.vertices.push_back(p);
+      }
+  // Face with normal axis a on side s: (u, v) run along axes a + 1 and a + 2, whose cross product is +e_a.
+  for (int a = 0; a < 3; ++a)
+    for (const int side : {0, n})
+      for (int u = 0; u < n; ++u)
+        for (int v = 0; v < n; ++v) {
+          auto corner = [&](int du, int dv) {
+            int c[3];
+            c[a] = side;
+            c[(a + 1) % 3] = u + du;
+            c[(a + 2) % 3] = v + dv;
+            return int32_t(at(c[0], c[1], c[2]));
+          };
+          const int32_t p00 = corner(0, 0), p10 = corner(1, 0), p11 = corner(1, 1), p01 = corner(0, 1);
+          if (side == n) {
+            m.triangles.push_back({p00, p10, p11});
+            m.triangles.push_back({p00, p11, p01});
+          } else {
+            m.triangles.push_back({p00, p11, p10});
+            m.triangles.push_back({p00, p01, p11});
+          }
+        }
+  return m;
+}
+
+// Appends mesh b to a, renumbering b's vertices.
+void append(TriMesh& a, const TriMesh& b) {
+  const int32_t off = int32_t(a.vertices.size());
+  a.vertices.insert(a.vertices.end(), b.vertices.begin(), b.vertices.end());
+  for (const auto& t : b.triangles) a.triangles.push_back({t[0] + off, t[1] + off, t[2] + off});
+}
+
+// Two blocks of material, x in [2, 7] mm and [8, 14] mm (y, z in [2, 14] mm), 1 mm leaves aligned with the blocks:
+// an empty 1 mm gap, no shared node, so two material components. A leaf is in the left block exactly when its box
+// ends at x <= 7 mm: the independent truth the component tests check against.
+constexpr double kGapMid = 0.0075;  // m
+ObjectModel two_blocks_model() {
+  OctreeSpec spec;
+  spec.root = kRoot;
+  spec.base_level = 4;
+  spec.max_level = 6;
+  return ObjectModel::build(spec,
+                            std::make_shared<BoxSetMaterial>(
+                                std::vector<Box3>{{Vec3(0.002, 0.002, 0.002), Vec3(0.007, 0.014, 0.014)},
+                                                  {Vec3(0.008, 0.002, 0.002), Vec3(0.014, 0.014, 0.014)}}),
+                            {}, {});
+}
+bool in_left_block(const ObjectModel& m, int leaf) { return m.root().cell_box(m.tree().leaf(leaf)).max.x() <= 0.007; }
+
+// The left surface box reaches into the gap up to x = 7.8 mm, 0.8 mm from the left block and 0.2 mm from the right
+// one; its vertices at x <= 7 mm lie in leaves, the last two columns (x = 7.27, 7.8 mm) in none. The right surface
+// box sticks out of the material at y = 1.5 mm (fallback vertices whose nearest leaf is in their own block anyway).
+const Vec3 kLeftLo(0.0025, 0.0025, 0.0025), kLeftHi(0.0078, 0.0135, 0.0135);
+const Vec3 kRightLo(0.0085, 0.0015, 0.0025), kRightHi(0.0135, 0.0135, 0.0135);
+constexpr int kBoxQuads = 10;
+
+// The leaf nearest to p among those that pass `keep`, by a scan; the lowest index among equals.
+template <class Keep>
+int brute_nearest(const ObjectModel& m, const Vec3& p, Keep keep) {
+  double best = std::numeric_limits<double>::infinity();
+  int leaf = -1;
+  for (int l = 0; l < m.num_elements(); ++l) {
+    if (!keep(l)) continue;
+    const Box3 b = m.root().cell_box(m.tree().leaf(l));
+    const double d = (b.min - p).cwiseMax(p - b.max).cwiseMax(0.0).squaredNorm();
+    if (d < best) best = d, leaf = l;
+  }
+  return leaf;
+}
+
+TEST(SurfaceEmbedding, FallbackVerticesStayInTheMaterialComponentOfTheirSurface) {
+  const ObjectModel m = two_blocks_model();
+  const TriMesh left = box_surface(kLeftLo, kLeftHi, kBoxQuads), right = box_surface(kRightLo, kRightHi, kBoxQuads);
+  ASSERT_GT(signed_volume(left), 0.0);
+  TriMesh s = left;
+  append(s, right);
+  const int n_left = int(left.vertices.size());
+  const SurfaceEmbedding e(m, s.vertices, s.triangles);
+
+  // The left box's face in the gap: nearer to the right block, yet bound to the nearest leaf of the left block.
+  int gap_face = 0, right_fallback = 0;
+  for (int v = 0; v < e.num_vertices(); ++v) {
+    const Vec3& p = s.vertices[std::size_t(v)];
+    const VertexEmbedding& ve = e.embeddings()[std::size_t(v)];
+    const bool is_left = v < n_left;
+    // Regular vertices lie in their own block; every vertex is bound to a leaf of its own block.
+    EXPECT_EQ(in_left_block(m, ve.leaf), is_left) << "vertex " << v;
+    if (!ve.fallback) continue;
+    EXPECT_EQ(ve.leaf, brute_nearest(m, p, [&](int l) { return in_left_block(m, l) == is_left; })) << "vertex " << v;
+    double sum = 0.0;
+    for (const double w : ve.weights) {
+      EXPECT_GE(w, kFallbackWeightMin);
+      EXPECT_LE(w, kFallbackWeightMax);
+      sum += w;
+    }
+    EXPECT_NEAR(sum, 1.0, 1e-14);
+    if (is_left && p.x() == kLeftHi.x()) {
+      // The old rule (plain nearest leaf, as embed_vertex still does) would take the right block here.
+      ++gap_face;
+      EXPECT_FALSE(in_left_block(m, embed_vertex(m.tree(), m.root(), p).leaf)) << "vertex " << v;
+    }
+    if (!is_left) ++right_fallback;
+  }
+  EXPECT_EQ(gap_face, (kBoxQuads + 1) * (kBoxQuads + 1));
+  EXPECT_GT(right_fallback, 0);
+
+  // Moving the right block's DOFs leaves the whole left surface where it was, and carries the right one along.
+  std::vector<Vec3> x = m.dofs().dof_rest;
+  const Vec3 shift(0.001, 0.002, -0.001);
+  int moved = 0;
+  for (Vec3& X : x)
+    if (X.x() > kGapMid) X += shift, ++moved;
+  ASSERT_GT(moved, 0);
+  Executor one(1), two(2);
+  std::vector<Vec3> rest_pos, p1, p2;
+  e.deformed_positions(m.dofs().dof_rest, rest_pos, one);
+  e.deformed_positions(x, p1, one);
+  e.deformed_positions(x, p2, two);
+  EXPECT_EQ(p1, p2);
+  for (int v = 0; v < e.num_vertices(); ++v) {
+    const Vec3 expected = rest_pos[std::size_t(v)] + (v < n_left ? Vec3::Zero() : shift);
+    EXPECT_LT((p1[std::size_t(v)] - expected).norm(), 1e-15) << "vertex " << v;
+  }
+}
+
+TEST(SurfaceEmbedding, SurfacePartsWithoutRegularVerticesUseThePlainNearestLeaf) {
+  // The left surface box, and a small closed box floating above the gap (z = 14.2 .. 14.6 mm), nearer to the right
+  // block (0.45 mm and more) than to the left one (0.55 mm and more), with no vertex in any leaf.
+  const ObjectModel m = two_blocks_model();
+  TriMesh s = box_surface(kLeftLo, kLeftHi, kBoxQuads);
+  const int n_left = int(s.vertices.size());
+  append(s, box_surface(Vec3(0.00755, 0.0076, 0.0142), Vec3(0.00795, 0.0084, 0.0146), 2));
+  const SurfaceEmbedding e(m, s.vertices, s.triangles);
+  int floating = 0;
+  for (int v = n_left; v < e.num_vertices(); ++v) {
+    const Vec3& p = s.vertices[std::size_t(v)];
+    const VertexEmbedding& ve = e.embeddings()[std::size_t(v)];
+    EXPECT_TRUE(ve.fallback);
+    EXPECT_EQ(ve.leaf, brute_nearest(m, p, [](int) { return true; })) << "vertex " << v;
+    EXPECT_FALSE(in_left_block(m, ve.leaf)) << "vertex " << v;
+    EXPECT_EQ(ve, embed_vertex(m.tree(), m.root(), p)) << "vertex " << v;
+    ++floating;
+  }
+  EXPECT_EQ(floating, 26);
+  // The left box's gap face, close by, still follows the left block.
+  for (int v = 0; v < n_left; ++v)
+    if (s.vertices[std::size_t(v)].x() == kLeftHi.x()) {
+      EXPECT_TRUE(in_left_block(m, e.embeddings()[std::size_t(v)].leaf));
+    }
+}
+
+TEST(SurfaceEmbedding, FallbackAnchorIsTheNearestRegularVertexByEdgesThenByIndex) {
+  // A strip across the gap: regular vertices a (left block) and b (right block), and the fallback chain f1 - f2 - f3
+  // between them, each link a triangle closed by an extra vertex in the gap. f1 is 1 edge from a and 3 from b, f3
+  // the reverse, f2 is 2 edges from both: it takes the one with the lower vertex index.
+  const ObjectModel m = two_blocks_model();
+  const Vec3 a(0.0065, 0.008, 0.008), b(0.0085, 0.008, 0.008);
+  for (const bool a_first : {true, false}) {
+    const int32_t ia = a_first ? 0 : 1, ib = a_first ? 1 : 0;
+    std::vector<Vec3> rest{a_first ? a : b, a_first ? b : a};
+    for (const double x : {0.0072, 0.0075, 0.0078}) rest.push_back(Vec3(x, 0.008, 0.008));      // f1, f2, f3
+    for (const double x : {0.0071, 0.00735, 0.00765, 0.0079}) rest.push_back(Vec3(x, 0.008, 0.009));  // closers
+    const SurfaceEmbedding e(m, rest, {{ia, 2, 5}, {2, 3, 6}, {3, 4, 7}, {4, ib, 8}});
+    EXPECT_EQ(e.num_fallback(), 7);
+    const auto& emb = e.embeddings();
+    EXPECT_TRUE(in_left_block(m, emb[std::size_t(ia)].leaf));
+    EXPECT_FALSE(in_left_block(m, emb[std::size_t(ib)].leaf));
+    EXPECT_TRUE(in_left_block(m, emb[2].leaf)) << "f1, a_first " << a_first;
+    EXPECT_FALSE(in_left_block(m, emb[4].leaf)) << "f3, a_first " << a_first;
+    EXPECT_EQ(in_left_block(m, emb[3].leaf), a_first) << "f2, a_first " << a_first;
+    // Each is the nearest leaf of the block it follows.
+    for (std::size_t v = 2; v < rest.size(); ++v) {
+      const bool left = in_left_block(m, emb[v].leaf);
+      EXPECT_EQ(emb[v].leaf, brute_nearest(m, rest[v], [&](int l) { return in_left_block(m, l) == left; }));
+    }
+  }
+}
+
+// A cut opens the gap: the model goes from one block, x in [2, 14] mm, to the two blocks (optionally refined at the
+// gap's walls). The surface edit removes half of the left box's gap face and inserts `count` vertices in the gap,
+// fanned together and tied to a kept vertex of the left box, so they take the left block's component although the
+// right block is nearer.
+void check_component_update_equals_rebuild(int count, bool refine, bool expect_merge) {
+  const ObjectModel before = test::box_model({Vec3::Constant(0.002), Vec3::Constant(0.014)}, kRoot.min, kRoot.size, 4);
+  ObjectModel after = two_blocks_model();
+  TriMesh s = box_surface(kLeftLo, kLeftHi, kBoxQuads);
+  const int n_left = int(s.vertices.size());
+  append(s, box_surface(kRightLo, kRightHi, kBoxQuads));
+  SurfaceEmbedding e(before, s.vertices, s.triangles);
+  ASSERT_GT(e.num_fallback(), 0);
+
+  SurfaceEdit edit;
+  std::vector<Vec3> new_rest;
+  std::vector<int> map(s.vertices.size(), -1);
+  int next = 0, tie = -1;
+  for (int v = 0; v < int(s.vertices.size()); ++v) {
+    const Vec3& p = s.vertices[std::size_t(v)];
+    if (v < n_left && p.x() == kLeftHi.x() && p.y() < 0.008) {
+      edit.removed_vertices.push_back(v);
+    } else {
+      map[std::size_t(v)] = next++;
+      new_rest.push_back(p);
+      if (v < n_left && p.x() < 0.007 && tie < 0) tie = map[std::size_t(v)];
+    }
+  }
+  ASSERT_GE(tie, 0);
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<double> gx(0.0076, 0.0079), gyz(0.003, 0.0075);
+  for (int i = 0; i < count; ++i) {
+    const Vec3 p(gx(rng), gyz(rng), gyz(rng));
+    edit.inserted_rest.push_back(p);
+    new_rest.push_back(p);
+  }
+  for (const auto& t : s.triangles)
+    if (map[std::size_t(t[0])] >= 0 && map[std::size_t(t[1])] >= 0 && map[std::size_t(t[2])] >= 0)
+      edit.triangles.push_back({map[std::size_t(t[0])], map[std::size_t(t[1])], map[std::size_t(t[2])]});
+  for (int i = 0; i + 2 < count; ++i) edit.triangles.push_back({next + i, next + i + 1, next + i + 2});
+  edit.triangles.push_back({tie, next, next + 1});
+  if (refine) {
+    // Refine the leaves on the gap's walls, and mark the new leaves there as changed.
+    std::vector<int> pick;
+    for (int l = 0; l < after.num_elements(); ++l) {
+      const Box3 b = after.root().cell_box(after.tree().leaf(l));
+      if (b.max.x() == 0.007 || b.min.x() == 0.008) pick.push_back(l);
+    }
+    after = after.refined(pick);
+  }
+  for (int l = 0; l < after.num_elements(); ++l) {
+    const Box3 b = after.root().cell_box(after.tree().leaf(l));
+    if (b.max.x() >= 0.0065 && b.min.x() <= 0.0085) edit.changed_leaves.push_back(l);
+  }
+
+  e.update(after, edit);
+  EXPECT_EQ(e.last_update_merged(), expect_merge);
+  EXPECT_LT(e.last_reembedded(), e.num_vertices() / 2);
+  const SurfaceEmbedding fresh(after, new_rest, edit.triangles);
+  expect_same(e, fresh);
+  EXPECT_EQ(e.num_fallback(), fresh.num_fallback());
+
+  // The component rule was at work: the inserted vertices are bound to the left block, where the plain nearest leaf
+  // is in the right one; and the surface split by blocks holds everywhere.
+  for (int v = 0; v < e.num_vertices(); ++v) {
+    const VertexEmbedding& ve = e.embeddings()[std::size_t(v)];
+    const bool is_left = v < n_left - int(edit.removed_vertices.size()) || v >= next;
+    EXPECT_EQ(in_left_block(after, ve.leaf), is_left) << "vertex " << v;
+    if (v >= next) {
+      EXPECT_TRUE(ve.fallback);
+      EXPECT_FALSE(in_left_block(after, embed_vertex(after.tree(), after.root(), new_rest[std::size_t(v)]).leaf));
+    }
+  }
+}
+
+TEST(SurfaceEmbedding, ComponentFallbackUpdateOneByOneEqualsRebuild) {
+  check_component_update_equals_rebuild(10, false, false);
+}
+TEST(SurfaceEmbedding, ComponentFallbackUpdateOneByOneWithRefinementEqualsRebuild) {
+  check_component_update_equals_rebuild(10, true, false);
+}
+TEST(SurfaceEmbedding, ComponentFallbackUpdateMergeEqualsRebuild) {
+  check_component_update_equals_rebuild(200, false, true);
+}
+TEST(SurfaceEmbedding, ComponentFallbackUpdateMergeWithRefinementEqualsRebuild) {
+  check_component_update_equals_rebuild(200, true, true);
 }
 
 TEST(SurfaceEmbedding, ClampedWeightsAreTheProjectionOntoTheRange) {

@@ -3,6 +3,16 @@
 // finest grid cell that holds it; the (code, vertex) pairs are kept sorted, so the vertices of a leaf are one
 // contiguous range found by two binary searches. Each vertex is bound to a leaf by 8 trilinear weights, which are
 // precomposed through the prolongation P into a short list of (DOF, weight) pairs.
+//
+// The fallback rule (SPEC §2.4). A vertex whose rest position lies in no leaf (M is coarser than S, or a cut removed
+// the material around it) is bound to the nearest leaf of its material component. Two elements share a material
+// component when they share a DOF (the transitive closure of "some slot of each reaches the same DOF through P"), so
+// the two sides of a cut are different components. The component of a fallback vertex is that of its anchor: the
+// regularly bound vertex (one that lies in a leaf) nearest to it along the triangle edges of S, fewest edges first,
+// the lowest vertex index among equals; the component is the one of the anchor's leaf. A fallback vertex whose
+// connected part of S has no regular vertex falls back to the nearest leaf of any component. "Nearest" is the
+// Euclidean distance from the rest point to the closed leaf box, ties going to the lower leaf index. A cut face's
+// vertices sitting in the gap the cut opened thus follow their own side, even where a leaf across the cut is nearer.
 #include <array>
 #include <cstdint>
 #include <span>
@@ -67,7 +77,7 @@ class ZCurveList {
 struct VertexEmbedding {
   int leaf = -1;                       ///< leaf index in the tree
   std::array<double, 8> weights{};     ///< trilinear weights, dimensionless, sum 1
-  bool fallback = false;               ///< true when the point lies in no leaf and was bound to the nearest one
+  bool fallback = false;               ///< true when the point lies in no leaf and was bound by the fallback rule
   friend bool operator==(const VertexEmbedding&, const VertexEmbedding&) = default;
 };
 
@@ -78,8 +88,11 @@ inline constexpr double kFallbackWeightMax = 1.5;
 /// Binds rest point X (m) to the leaf that contains its finest cell, with trilinear weights. A point in no leaf
 /// falls back to the nearest leaf (distance from X to the leaf box; ties go to the lower leaf index) with
 /// extrapolated trilinear weights, projected onto [kFallbackWeightMin, kFallbackWeightMax]^8 with sum 1 (a common
-/// shift, then clamping). This free function scans all leaves for the fallback; SurfaceEmbedding finds the same leaf
-/// on a bucket grid. Throws std::invalid_argument when the tree has no leaf.
+/// shift, then clamping). This free function does NOT apply the material-component restriction of SPEC §2.4: a lone
+/// point has no triangles, hence no surface neighbour to take a component from, so it goes to the nearest leaf of
+/// any component. It scans all leaves. SurfaceEmbedding finds the same leaf on a bucket grid for fallback vertices
+/// whose connected part of S has no regular vertex, and the nearest leaf of the anchor's component otherwise (see
+/// the top of this file). Throws std::invalid_argument when the tree has no leaf.
 VertexEmbedding embed_vertex(const Octree& tree, const RootGeometry& root, const Vec3& rest);
 
 /// Projects weights onto {w in [kFallbackWeightMin, kFallbackWeightMax]^8, sum w = 1}; weights already inside are
@@ -97,8 +110,10 @@ struct SurfaceEdit {
 /// The surface S bound to an object model (constant per model revision; the deformed DOF positions come per step).
 class SurfaceEmbedding {
  public:
-  /// Embeds the rest vertices (|V|, m) and triangles (|F|) of S in `model`. Throws std::invalid_argument naming the
-  /// offending vertex or triangle for a non-finite vertex or a triangle index out of range.
+  /// Embeds the rest vertices (|V|, m) and triangles (|F|) of S in `model`; vertices in no leaf follow the fallback
+  /// rule at the top of this file (material components from model.dofs(), anchors along the triangles). Throws
+  /// std::invalid_argument naming the offending vertex or triangle for a non-finite vertex or a triangle index out
+  /// of range, or when the model has no leaf.
   SurfaceEmbedding(const ObjectModel& model, std::vector<Vec3> rest, std::vector<std::array<int32_t, 3>> triangles);
 
   [[nodiscard]] int num_vertices() const { return int(m_rest.size()); }
@@ -126,10 +141,11 @@ class SurfaceEmbedding {
 
   /// Applies a cut: removes and inserts vertices (ZCurveList::update), replaces the triangles, re-embeds only the
   /// new vertices, the vertices of leaves that are new in `new_model` or listed in edit.changed_leaves, the vertices
-  /// whose old leaf is gone, and the fallback vertices; then recomposes every vertex through the new P. The result
-  /// equals a fresh SurfaceEmbedding of the new surface in `new_model`. Returns the old-to-new vertex map (-1 for a
-  /// removed vertex). Throws std::invalid_argument for bad indices or a model with another root cube; the embedding
-  /// is unchanged then.
+  /// whose old leaf is gone, and all fallback vertices (their anchors and components depend on the new surface and
+  /// the new DOFs); then recomposes every vertex through the new P. The result equals a fresh SurfaceEmbedding of
+  /// the new surface in `new_model`. Returns the old-to-new vertex map (-1 for a removed vertex). Throws
+  /// std::invalid_argument for bad indices or a model with another root cube or no leaf; the embedding is
+  /// unchanged then.
   std::vector<int> update(const ObjectModel& new_model, const SurfaceEdit& edit);
   /// Moves to a new revision of the model with the same surface (refinement).
   void rebind(const ObjectModel& new_model);
@@ -140,7 +156,8 @@ class SurfaceEmbedding {
   [[nodiscard]] int last_reembedded() const { return m_last_reembedded; }
 
  private:
-  // Re-embeds the vertices flagged in `redo` (all when redo is empty) in m_tree and recomposes all through P.
+  // Re-embeds the vertices flagged in `redo` (all when redo is empty) in m_tree and recomposes all through P. Every
+  // unflagged vertex must be regularly bound, and the adjacency must be built for m_triangles (fallback anchors).
   void embed_and_compose(const ObjectModel& model, const std::vector<char>& redo);
   void build_adjacency();
   void check_triangles(const std::vector<std::array<int32_t, 3>>& triangles, std::size_t num_vertices) const;

@@ -251,7 +251,7 @@ TEST(SurfaceEmbedding, FallbackSearchMatchesTheBruteForceScan) {
     EXPECT_EQ(e.embeddings()[v], embed_vertex(m.tree(), m.root(), pts[v])) << "point " << v;
 }
 
-// ---- The fallback rule respects material components (SPEC §2.4) -----------------------------------------------------
+// ---- The fallback rule respects material components (SPEC §2.4) ----------------------------------------------------
 
 // A closed axis-aligned box [lo, hi] (m) with n quads per edge, welded, counter-clockwise seen from outside.
 TriMesh box_surface(const Vec3& lo, const Vec3& hi, int n) {

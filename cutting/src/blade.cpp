@@ -431,8 +431,8 @@ double inscribed_radius(const sim::TriMesh& closed_mesh) {
   };
   auto lower_priority = [](const Cell& x, const Cell& y) { return x.upper < y.upper || (x.upper == y.upper && x.id > y.id); };
   std::priority_queue<Cell, std::vector<Cell>, decltype(lower_priority)> queue(lower_priority);
-  constexpr double kRelTol = 1e-3;
-  constexpr int kBudget = 40000;
+  constexpr double kRelTol = 5e-3;
+  constexpr int kBudget = 10000;
   double best = 0.0;
   std::vector<std::pair<double, Vec3>> seeds;  // the best few inside points, for the polish
   std::uint64_t next_id = 0;
@@ -470,7 +470,7 @@ double inscribed_radius(const sim::TriMesh& closed_mesh) {
     if (k != 13) dirs[std::size_t(n++)] = Vec3(k % 3 - 1, k / 3 % 3 - 1, k / 9 - 1).normalized();
   for (auto [f, x] : seeds) {
     double step = last_half;
-    for (int it = 0; it < 2000 && step > 1e-9 * diag; ++it) {
+    for (int it = 0; it < 500 && step > 1e-7 * diag; ++it) {
       double fbest = f;
       Vec3 xbest = x;
       for (const Vec3& u : dirs) {

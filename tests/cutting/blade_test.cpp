@@ -503,7 +503,7 @@ TEST(InscribedRadius, MatchesAnalyticValuesWithinOnePercent) {
     const auto t0 = std::chrono::steady_clock::now();
     const double r = inscribed_radius(c.mesh);
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-    std::printf("inscribed_radius %-18s %3zu triangles: r = %.6g m, truth %.6g m, error %+.3f%%, %.1f ms\n", c.name,
+    std::printf("inscribed_radius %-18s %3zu triangles: r = %.6g m, truth %.6g m, error %+.5f%%, %.1f ms\n", c.name,
                 c.mesh.triangles.size(), r, c.truth, 100.0 * (r / c.truth - 1.0), ms);
     EXPECT_NEAR(r, c.truth, 0.01 * c.truth) << c.name;
     // The value is attained by a ball inside the solid, so it cannot exceed the truth (beyond the tolerance).

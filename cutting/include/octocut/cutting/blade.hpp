@@ -91,11 +91,14 @@ class BladeVolume {
 };
 
 /// Radius of the largest ball inside the closed mesh, m: the r of paper §4.4.1 (refinement edge l_e = r / √3).
-/// Maximises the signed distance to the surface by best-first branch and bound over octree cells (the signed
-/// distance is 1-Lipschitz, so a cell of centre c and half-diagonal δ holds no value above f(c) + δ) until the bound
-/// is within 0.1% or 40000 evaluations are spent, then polishes the best points by compass search in 26
-/// directions. The result is a value attained inside the solid, so it never overestimates by more than the surface
-/// tolerance. Throws std::invalid_argument as BladeVolume does.
+/// Maximises the signed distance to the surface (positive inside), first by best-first branch and bound over an
+/// octree of cells (the signed distance is 1-Lipschitz, so a cell of centre c and half-diagonal δ holds no value
+/// above f(c) + δ) until the bound is within 0.5% or 10000 cells are evaluated, then polishes the 4 best points by
+/// compass search in the 26 lattice directions down to steps of 1e-7 of the bounding-box diagonal. The result is a
+/// value attained inside the solid, so it never overestimates (beyond the on-surface tolerance); on cylinders,
+/// boxes, sphere meshes and star prisms, rotated or not, it matches the analytic value to 1e-7 relative. Costs
+/// about 10–40 ms for 40–1000 triangles: compute it once per blade. Throws std::invalid_argument as BladeVolume
+/// does.
 double inscribed_radius(const sim::TriMesh& closed_mesh);
 
 /// Indices of the live tets of M that meet the blade solid, ascending (candidates from MaterialGraph::tets_near on

@@ -612,9 +612,11 @@ TEST(TetsTouched, TimingOfATwoMillimetrePunch) {
               ms(t4, t5) / kRepeat, touched / kRepeat);
   EXPECT_EQ(hits_hex, hits_box);
   EXPECT_GT(hits_box, 30);
+#ifdef NDEBUG  // optimised builds only: Debug and sanitizer builds are 10-100x slower
   EXPECT_LT(ms(t0, t1), 20.0);
   EXPECT_LT(ms(t1, t2), 20.0);
   EXPECT_LT(ms(t4, t5) / kRepeat, 2.0);
+#endif
 }
 
 }  // namespace

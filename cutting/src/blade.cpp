@@ -106,6 +106,98 @@ bool triangle_meets_centered_box(const std::array<Vec3, 3>& t, const Vec3& h) {
   return true;
 }
 
+// A tetrahedron prepared for many triangle tests: corners relative to corner 0, edges, face normals with the tet's
+// extent along them, and for a tet with volume the four inner half-spaces n_k · x <= c_k.
+struct TetSat {
+  Vec3 o;                            // corner 0, m
+  std::array<Vec3, 4> v;             // corners relative to o, m
+  std::array<Vec3, 6> e;             // edges, m
+  std::array<Vec3, 4> fn;            // face normals (unnormalised; zero for a degenerate tet)
+  std::array<double, 4> lo{}, hi{};  // extent of the tet along each face normal
+  bool solid = false;                // the tet has volume (|6 V| > 1e-9 L^3, L its longest edge)
+  std::array<Vec3, 4> n;             // outward normal of the face opposite corner k (solid tets)
+  std::array<double, 4> c{};         // plane offsets: the tet is n_k · x <= c_k + tol_k (solid tets)
+  std::array<double, 4> tol{};       // 1e-12 L |n_k|: touching counts
+
+  explicit TetSat(const Tet& t) : o(t[0]), v{Vec3::Zero(), t[1] - t[0], t[2] - t[0], t[3] - t[0]} {
+    e = {v[1], v[2], v[3], v[2] - v[1], v[3] - v[1], v[3] - v[2]};
+    fn = {e[0].cross(e[1]), e[0].cross(e[2]), e[1].cross(e[2]), e[3].cross(e[4])};
+    double L = 0.0;
+    for (const Vec3& g : e) L = std::max(L, g.norm());
+    for (std::size_t k = 0; k < 4; ++k) {
+      lo[k] = std::numeric_limits<double>::infinity();
+      hi[k] = -lo[k];
+      for (const Vec3& p : v) {
+        lo[k] = std::min(lo[k], fn[k].dot(p));
+        hi[k] = std::max(hi[k], fn[k].dot(p));
+      }
+    }
+    const double det = v[1].dot(v[2].cross(v[3]));
+    solid = std::abs(det) > 1e-9 * L * L * L;
+    if (!solid) return;
+    static constexpr int kFace[4][3] = {{1, 2, 3}, {0, 2, 3}, {0, 1, 3}, {0, 1, 2}};
+    for (std::size_t k = 0; k < 4; ++k) {
+      const Vec3& a = v[std::size_t(kFace[k][0])];
+      Vec3 nk = (v[std::size_t(kFace[k][1])] - a).cross(v[std::size_t(kFace[k][2])] - a);
+      if (nk.dot(v[k] - a) > 0.0) nk = -nk;  // the opposite corner lies inside
+      n[k] = nk;
+      c[k] = nk.dot(a);
+      tol[k] = 1e-12 * L * nk.norm();
+    }
+  }
+};
+
+// True when the closed triangle t (m) meets the closed tet. A tet with volume clips the triangle by its four inner
+// half-spaces (Sutherland–Hodgman; the triangle meets the tet iff something is left). A degenerate tet (flat, a
+// segment or a point) is tested by separating axes instead: the triangle's normal and in-plane edge normals, the
+// tet's face normals, the edge–edge cross products, and the triangle normal crossed with the tet's edges (the
+// in-plane normals of a flat tet lying in the triangle's plane).
+bool triangle_meets_tet(const std::array<Vec3, 3>& t, const TetSat& T) {
+  if (T.solid) {
+    std::array<Vec3, 8> poly{t[0] - T.o, t[1] - T.o, t[2] - T.o}, next{};
+    std::array<double, 8> d{};
+    int m = 3;
+    for (std::size_t k = 0; k < 4; ++k) {
+      bool any_in = false, any_out = false;
+      for (int i = 0; i < m; ++i) {
+        d[std::size_t(i)] = T.n[k].dot(poly[std::size_t(i)]) - T.c[k] - T.tol[k];
+        (d[std::size_t(i)] <= 0.0 ? any_in : any_out) = true;
+      }
+      if (!any_in) return false;
+      if (!any_out) continue;
+      int r = 0;
+      for (int i = 0; i < m; ++i) {
+        const int j = (i + 1) % m;
+        const double di = d[std::size_t(i)], dj = d[std::size_t(j)];
+        if (di <= 0.0) next[std::size_t(r++)] = poly[std::size_t(i)];
+        if ((di <= 0.0) != (dj <= 0.0))
+          next[std::size_t(r++)] = poly[std::size_t(i)] + (di / (di - dj)) * (poly[std::size_t(j)] - poly[std::size_t(i)]);
+      }
+      poly.swap(next);
+      m = r;
+    }
+    return m > 0;
+  }
+  const std::array<Vec3, 3> a{t[0] - T.o, t[1] - T.o, t[2] - T.o};
+  const std::array<Vec3, 3> te{a[1] - a[0], a[2] - a[1], a[0] - a[2]};
+  const Vec3 n = te[0].cross(te[1]);
+  if (separated_on(n, a, T.v)) return false;
+  for (std::size_t k = 0; k < 4; ++k) {
+    const double p0 = T.fn[k].dot(a[0]), p1 = T.fn[k].dot(a[1]), p2 = T.fn[k].dot(a[2]);
+    const double tmin = std::min({p0, p1, p2}), tmax = std::max({p0, p1, p2});
+    const double slack = 1e-12 * std::max({std::abs(tmin), std::abs(tmax), std::abs(T.lo[k]), std::abs(T.hi[k])});
+    if (tmin > T.hi[k] + slack || tmax < T.lo[k] - slack) return false;
+  }
+  for (const Vec3& g : te)
+    if (separated_on(n.cross(g), a, T.v)) return false;
+  for (const Vec3& g : T.e) {
+    for (const Vec3& f : te)
+      if (separated_on(f.cross(g), a, T.v)) return false;
+    if (separated_on(n.cross(g), a, T.v)) return false;
+  }
+  return true;
+}
+
 // Generic directions for the parity rays: no two coplanar with a coordinate axis, none parallel to a face of an
 // axis-aligned or 45°-rotated mesh.
 constexpr int kNumDirections = 8;
@@ -338,33 +430,6 @@ bool BladeVolume::contains(const Vec3& p) const {
   return winding_number(p) > 0.5;
 }
 
-bool BladeVolume::triangle_meets_tet(int f, const Tet& tet) const {
-  const auto& t = m_tri[std::size_t(f)];
-  // Work relative to the tet's first corner to keep the products small.
-  const Vec3 o = tet[0];
-  const std::array<Vec3, 3> a{t[0] - o, t[1] - o, t[2] - o};
-  const std::array<Vec3, 4> b{Vec3::Zero(), tet[1] - o, tet[2] - o, tet[3] - o};
-  const std::array<Vec3, 3> te{a[1] - a[0], a[2] - a[1], a[0] - a[2]};
-  const std::array<Vec3, 6> be{b[1] - b[0], b[2] - b[0], b[3] - b[0], b[2] - b[1], b[3] - b[1], b[3] - b[2]};
-  const Vec3 n = te[0].cross(te[1]);
-  // The triangle's normal and in-plane edge normals.
-  if (separated_on(n, a, b)) return false;
-  for (const Vec3& e : te)
-    if (separated_on(n.cross(e), a, b)) return false;
-  // The tet's face normals.
-  if (separated_on(be[0].cross(be[1]), a, b) || separated_on(be[0].cross(be[2]), a, b) ||
-      separated_on(be[1].cross(be[2]), a, b) || separated_on(be[3].cross(be[4]), a, b))
-    return false;
-  // Edge–edge cross products, and the triangle normal crossed with the tet's edges (in-plane normals of a flat
-  // tet lying in the triangle's plane).
-  for (const Vec3& g : be) {
-    for (const Vec3& e : te)
-      if (separated_on(e.cross(g), a, b)) return false;
-    if (separated_on(n.cross(g), a, b)) return false;
-  }
-  return true;
-}
-
 bool BladeVolume::overlaps_box(const Box3& box) const {
   if ((box.min.array() > box.max.array()).any() || !boxes_meet(box, m_bounds)) return false;
   const Vec3 c = 0.5 * (box.min + box.max), h = 0.5 * (box.max - box.min);
@@ -383,7 +448,8 @@ bool BladeVolume::overlaps_tet(const Tet& tet) const {
     if (!c.allFinite()) return false;
   const Box3 tb = box_of(tet);
   if (!boxes_meet(tb, m_bounds)) return false;
-  if (any_triangle_near(tb, [&](int f) { return triangle_meets_tet(f, tet); })) return true;
+  const TetSat sat(tet);
+  if (any_triangle_near(tb, [&](int f) { return triangle_meets_tet(m_tri[std::size_t(f)], sat); })) return true;
   return contains(0.25 * (tet[0] + tet[1] + tet[2] + tet[3]));
 }
 
@@ -394,16 +460,19 @@ bool BladeVolume::overlaps_hexahedron(const std::array<Vec3, 8>& corners) const 
   if (!boxes_meet(hb, m_bounds)) return false;
   // The six tets around the diagonal 0–7, one per order in which the axes are stepped.
   static constexpr int kPerms[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
-  std::array<Tet, 6> tets{};
+  std::vector<TetSat> tets;
   std::array<Box3, 6> boxes{};
+  tets.reserve(6);
   for (int s = 0; s < 6; ++s) {
     const int v1 = 1 << kPerms[s][0], v2 = v1 | (1 << kPerms[s][1]);
-    tets[std::size_t(s)] = {corners[0], corners[std::size_t(v1)], corners[std::size_t(v2)], corners[7]};
-    boxes[std::size_t(s)] = box_of(tets[std::size_t(s)]);
+    const Tet t{corners[0], corners[std::size_t(v1)], corners[std::size_t(v2)], corners[7]};
+    tets.emplace_back(t);
+    boxes[std::size_t(s)] = box_of(t);
   }
   if (any_triangle_near(hb, [&](int f) {
         for (int s = 0; s < 6; ++s)
-          if (boxes_meet(boxes[std::size_t(s)], m_tri_box[std::size_t(f)]) && triangle_meets_tet(f, tets[std::size_t(s)]))
+          if (boxes_meet(boxes[std::size_t(s)], m_tri_box[std::size_t(f)]) &&
+              triangle_meets_tet(m_tri[std::size_t(f)], tets[std::size_t(s)]))
             return true;
         return false;
       }))

@@ -366,6 +366,21 @@ TEST(BladeOverlaps, BoxBladeAgainstTetsMatchesClippedVolumeAndSeparatingAxes) {
   }
   EXPECT_GT(hits, 300);
   EXPECT_GT(misses, 300);
+  // Degenerate tets: flat (4th corner in the plane of the others) and needle-like (all on a line). Truth by the
+  // separating axes alone, which are complete for these shapes too; near-contacts are skipped.
+  int flat_hits = 0, flat_misses = 0;
+  for (int n = 0; n < 3000; ++n) {
+    Tet t = random_tet(rng, Vec3(c(rng), c(rng), c(rng)), s(rng));
+    if (n % 3 == 0) t[3] = t[0] + 0.3 * (t[1] - t[0]) + 0.5 * (t[2] - t[0]);
+    else if (n % 3 == 1) t[3] = t[0] + 1.7 * (t[1] - t[0]) - 0.4 * (t[2] - t[0]);
+    else t[2] = t[0] + 0.4 * (t[1] - t[0]), t[3] = t[0] - 0.6 * (t[1] - t[0]);
+    const double gap = box_tet_gap(box_corners(solid), t);
+    if (std::abs(gap) < 1e-9) continue;
+    EXPECT_EQ(blade.overlaps_tet(t), gap < 0.0) << "degenerate tet " << n;
+    (gap < 0.0 ? flat_hits : flat_misses)++;
+  }
+  EXPECT_GT(flat_hits, 200);
+  EXPECT_GT(flat_misses, 200);
   // A tet swallowing the blade (caught by the triangle test) and one inside it (caught by the inside test).
   EXPECT_TRUE(blade.overlaps_tet({Vec3(-10, -10, -10), Vec3(30, -10, -10), Vec3(-10, 30, -10), Vec3(-10, -10, 30)}));
   EXPECT_TRUE(blade.overlaps_tet({Vec3(0, 0, 0), Vec3(0.1, 0, 0), Vec3(0, 0.1, 0), Vec3(0, 0, 0.1)}));
@@ -573,49 +588,60 @@ TEST(TetsTouched, BoxBladeMatchesBruteForceTruth) {
 }
 
 TEST(TetsTouched, TimingOfATwoMillimetrePunch) {
-  // A 2 mm cylinder of 50 segments (200 triangles) against 1000 boxes, 1000 tets and 1000 hexahedra around it, and
-  // tets_touched on a 13k-tet M. Timed loops; the thresholds are loose (shared 2-core machines), the printout is
-  // the measurement.
-  const BladeVolume blade(transformed(prism(regular_polygon(0.001, 50), -0.001, 0.001), Mat3::Identity(),
-                                      Vec3(0.02, 0.02, 0.02)));
+  // A 2 mm cylinder of 50 segments (200 triangles) against the 1000 cells of a 10^3 grid of 0.3 mm cells around it
+  // (as boxes and as hexahedra), 1000 tets (one per cell), and tets_touched on a 13k-tet M of 1.5 mm cells.
+  // Timed loops; the thresholds are loose (shared 2-core machines), the printout is the measurement.
+  const Vec3 centre = Vec3::Constant(0.02);
+  const BladeVolume blade(transformed(prism(regular_polygon(0.001, 50), -0.001, 0.001), Mat3::Identity(), centre));
   ASSERT_EQ(blade.mesh().triangles.size(), 200u);
   std::mt19937 rng(43);
-  std::uniform_real_distribution<double> c(0.017, 0.023), e(0.0002, 0.001);
   std::vector<Box3> boxes;
   std::vector<Tet> tets;
-  for (int n = 0; n < 1000; ++n) {
-    const Vec3 lo(c(rng), c(rng), c(rng));
-    boxes.push_back(Box3{lo, lo + Vec3::Constant(e(rng))});
-    tets.push_back(random_tet(rng, lo, e(rng)));
-  }
-  using clock = std::chrono::steady_clock;
-  auto t0 = clock::now();
-  int hits_box = 0;
-  for (const Box3& b : boxes) hits_box += blade.overlaps_box(b);
-  auto t1 = clock::now();
-  int hits_tet = 0;
-  for (const Tet& t : tets) hits_tet += blade.overlaps_tet(t);
-  auto t2 = clock::now();
-  int hits_hex = 0;
-  for (const Box3& b : boxes) hits_hex += blade.overlaps_hexahedron(box_corners(b));
-  auto t3 = clock::now();
-  const sim::MaterialGraph graph(kuhn_box(Box3{Vec3::Constant(0.0), Vec3::Constant(0.04)}, 13, 0.3, 7));
-  constexpr int kRepeat = 100;
+  const double h = 0.0003;
+  for (int k = 0; k < 10; ++k)
+    for (int j = 0; j < 10; ++j)
+      for (int i = 0; i < 10; ++i) {
+        const Vec3 lo = centre + h * Vec3(i - 5, j - 5, k - 5);
+        boxes.push_back(Box3{lo, lo + Vec3::Constant(h)});
+        tets.push_back(random_tet(rng, lo + Vec3::Constant(0.5 * h), 0.5 * h));
+      }
+  // Each workload is timed 20 times and the fastest run is reported: the other builds on the machine only add.
+  auto fastest_ms = [](auto&& work) {
+    double best = std::numeric_limits<double>::infinity();
+    for (int r = 0; r < 20; ++r) {
+      const auto t0 = std::chrono::steady_clock::now();
+      work();
+      best = std::min(best, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    }
+    return best;
+  };
+  int hits_box = 0, hits_tet = 0, hits_hex = 0;
+  const double ms_box = fastest_ms([&] {
+    hits_box = 0;
+    for (const Box3& b : boxes) hits_box += blade.overlaps_box(b);
+  });
+  const double ms_tet = fastest_ms([&] {
+    hits_tet = 0;
+    for (const Tet& t : tets) hits_tet += blade.overlaps_tet(t);
+  });
+  const double ms_hex = fastest_ms([&] {
+    hits_hex = 0;
+    for (const Box3& b : boxes) hits_hex += blade.overlaps_hexahedron(box_corners(b));
+  });
+  const sim::MaterialGraph graph(kuhn_box(Box3{Vec3::Constant(0.01), Vec3::Constant(0.03)}, 13, 0.3, 7));
   std::size_t touched = 0;
-  auto t4 = clock::now();
-  for (int r = 0; r < kRepeat; ++r) touched += tets_touched(graph, blade).size();
-  auto t5 = clock::now();
-  auto ms = [](auto a, auto b) { return std::chrono::duration<double, std::milli>(b - a).count(); };
-  std::printf("1000 overlaps_box: %.3f ms (%d hits); 1000 overlaps_tet: %.3f ms (%d hits); 1000 overlaps_hexahedron: "
-              "%.3f ms (%d hits); tets_touched on %d tets: %.4f ms (%zu tets)\n",
-              ms(t0, t1), hits_box, ms(t1, t2), hits_tet, ms(t2, t3), hits_hex, graph.num_tets(),
-              ms(t4, t5) / kRepeat, touched / kRepeat);
+  const double ms_touched = fastest_ms([&] { touched = tets_touched(graph, blade).size(); });
+  std::printf("fastest of 20: 1000 overlaps_box %.3f ms (%d hits); 1000 overlaps_tet %.3f ms (%d hits); 1000 "
+              "overlaps_hexahedron %.3f ms (%d hits); tets_touched on %d tets %.4f ms (%zu tets)\n",
+              ms_box, hits_box, ms_tet, hits_tet, ms_hex, hits_hex, graph.num_tets(), ms_touched, touched);
   EXPECT_EQ(hits_hex, hits_box);
-  EXPECT_GT(hits_box, 30);
+  EXPECT_GT(hits_box, 200);
+  EXPECT_LT(hits_box, 800);
+  EXPECT_GT(touched, 20u);
 #ifdef NDEBUG  // optimised builds only: Debug and sanitizer builds are 10-100x slower
-  EXPECT_LT(ms(t0, t1), 20.0);
-  EXPECT_LT(ms(t1, t2), 20.0);
-  EXPECT_LT(ms(t4, t5) / kRepeat, 2.0);
+  EXPECT_LT(ms_box, 5.0);
+  EXPECT_LT(ms_tet, 5.0);
+  EXPECT_LT(ms_touched, 1.0);
 #endif
 }
 

@@ -78,8 +78,6 @@ class BladeVolume {
   int parity(const sim::Vec3& p, int k) const;
   // Sum of the triangles' solid angles seen from p over 4π (the winding number), the last resort of contains().
   double winding_number(const sim::Vec3& p) const;
-  // True when the closed tet meets triangle f (separating axis test).
-  bool triangle_meets_tet(int f, const std::array<sim::Vec3, 4>& tet) const;
 
   sim::TriMesh m_mesh;
   sim::Box3 m_bounds;                      ///< bounding box of the vertices, m

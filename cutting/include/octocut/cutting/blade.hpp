@@ -17,9 +17,12 @@ namespace octocut::cutting {
 /// the surface is inside, and solids that only touch overlap. Immutable after construction; queries are const and
 /// may run concurrently.
 ///
-/// Overlap of the solid with a convex cell X (box or tet) is decided as: some blade triangle meets X (separating
-/// axis tests), or else X lies wholly inside or wholly outside the solid, which one point of X decides. A blade that
-/// lies inside X is caught by the triangle test.
+/// Overlap of the solid with a cell X (box, tet, or the tets of a hexahedron) is decided as: some blade triangle
+/// meets X, or else X lies wholly inside or wholly outside the solid, which one point of X decides (X is connected
+/// and does not meet the surface). A blade that lies inside X is caught by the triangle test. Triangle–box: the 13
+/// separating axes of Akenine-Möller. Triangle–tet: the triangle clipped by the tet's four half-spaces, or
+/// separating axes when the tet has no volume. Near-touching configurations (within ~1e-12 relative) count as
+/// meeting, so rounding errs towards overlap.
 class BladeVolume {
  public:
   /// Takes the blade surface. Closedness and orientation are the caller's contract (cutting/mesh_check.hpp and

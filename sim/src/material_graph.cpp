@@ -163,112 +163,185 @@ double tet_face_section_area(const Tet& tet, const Box3& face, int axis) {
   return pts.size() >= 3 ? polygon_area(pts) : 0.0;
 }
 
-MaterialGraph::MaterialGraph(TetMesh mesh) : m_mesh(std::move(mesh)) {
-  const int nv = int(m_mesh.vertices.size());
-  for (std::size_t i = 0; i < m_mesh.vertices.size(); ++i)
-    if (!m_mesh.vertices[i].allFinite())
+// The immutable part of M, shared by all revisions made by without().
+struct MaterialGraph::Geometry {
+  TetMesh mesh;
+  std::vector<Box3> tet_box;        ///< bounding box of each tet, m (|T|)
+  std::vector<double> tet_volume;   ///< m^3 (|T|)
+  Box3 bounds;                      ///< bounding box of all tets, m; the grid's origin
+  std::array<int, 3> dims{1, 1, 1}; ///< grid cells per axis
+  Vec3 cell = Vec3::Ones();         ///< grid cell edge per axis, m
+  std::vector<int> cell_begin;      ///< CSR offsets into cell_tets (cells + 1)
+  std::vector<int> cell_tets;       ///< tet indices per grid cell, ascending within a cell
+
+  [[nodiscard]] Tet tet(int t) const {
+    const auto& q = mesh.tets[std::size_t(t)];
+    return {mesh.vertices[std::size_t(q[0])], mesh.vertices[std::size_t(q[1])], mesh.vertices[std::size_t(q[2])],
+            mesh.vertices[std::size_t(q[3])]};
+  }
+};
+
+MaterialGraph::MaterialGraph(TetMesh mesh) {
+  auto geo = std::make_shared<Geometry>();
+  geo->mesh = std::move(mesh);
+  TetMesh& m = geo->mesh;
+  const int nv = int(m.vertices.size());
+  for (std::size_t i = 0; i < m.vertices.size(); ++i)
+    if (!m.vertices[i].allFinite())
       throw std::invalid_argument("material graph: vertex " + std::to_string(i) + " is not finite");
 
   // Orient every tet positively and drop tets without volume.
   std::vector<std::array<int32_t, 4>> kept;
-  kept.reserve(m_mesh.tets.size());
-  for (std::size_t t = 0; t < m_mesh.tets.size(); ++t) {
-    auto tet = m_mesh.tets[t];
+  kept.reserve(m.tets.size());
+  for (std::size_t t = 0; t < m.tets.size(); ++t) {
+    auto tet = m.tets[t];
     for (int32_t i : tet)
       if (i < 0 || i >= nv)
         throw std::invalid_argument("material graph: tet " + std::to_string(t) + " has a vertex index out of range");
-    const double v = signed_tet_volume(m_mesh.vertices[std::size_t(tet[0])], m_mesh.vertices[std::size_t(tet[1])],
-                                       m_mesh.vertices[std::size_t(tet[2])], m_mesh.vertices[std::size_t(tet[3])]);
+    const double v = signed_tet_volume(m.vertices[std::size_t(tet[0])], m.vertices[std::size_t(tet[1])],
+                                       m.vertices[std::size_t(tet[2])], m.vertices[std::size_t(tet[3])]);
     if (v == 0.0) continue;
     if (v < 0.0) std::swap(tet[2], tet[3]);
     kept.push_back(tet);
   }
-  m_mesh.tets = std::move(kept);
-  if (m_mesh.tets.empty()) throw std::invalid_argument("material graph: no tetrahedra with volume");
+  m.tets = std::move(kept);
+  if (m.tets.empty()) throw std::invalid_argument("material graph: no tetrahedra with volume");
 
   // Per-tet bounds and volumes.
-  const std::size_t nt = m_mesh.tets.size();
-  m_tet_box.resize(nt);
-  m_tet_volume.resize(nt);
-  m_bounds.min = Vec3::Constant(std::numeric_limits<double>::infinity());
-  m_bounds.max = -m_bounds.min;
+  const std::size_t nt = m.tets.size();
+  geo->tet_box.resize(nt);
+  geo->tet_volume.resize(nt);
+  geo->bounds.min = Vec3::Constant(std::numeric_limits<double>::infinity());
+  geo->bounds.max = -geo->bounds.min;
   for (std::size_t t = 0; t < nt; ++t) {
-    const Tet p = tet(int(t));
+    const Tet p = geo->tet(int(t));
     Box3 b{p[0], p[0]};
     for (int k = 1; k < 4; ++k) {
       b.min = b.min.cwiseMin(p[std::size_t(k)]);
       b.max = b.max.cwiseMax(p[std::size_t(k)]);
     }
-    m_tet_box[t] = b;
-    m_tet_volume[t] = tet_volume(p);
-    m_volume += m_tet_volume[t];
-    m_bounds.min = m_bounds.min.cwiseMin(b.min);
-    m_bounds.max = m_bounds.max.cwiseMax(b.max);
+    geo->tet_box[t] = b;
+    geo->tet_volume[t] = sim::tet_volume(p);
+    geo->bounds.min = geo->bounds.min.cwiseMin(b.min);
+    geo->bounds.max = geo->bounds.max.cwiseMax(b.max);
   }
 
   // Uniform grid with about one tet per cell: cell edge ~ cube root of the bounding volume per tet.
-  const Vec3 ext = (m_bounds.max - m_bounds.min).cwiseMax(1e-12);
+  const Vec3 ext = (geo->bounds.max - geo->bounds.min).cwiseMax(1e-12);
   const double h = std::cbrt(ext.prod() / double(nt));
   for (int a = 0; a < 3; ++a) {
-    m_dims[std::size_t(a)] = std::clamp(int(std::ceil(ext[a] / h)), 1, 256);
-    m_cell[a] = ext[a] / m_dims[std::size_t(a)];
+    geo->dims[std::size_t(a)] = std::clamp(int(std::ceil(ext[a] / h)), 1, 256);
+    geo->cell[a] = ext[a] / geo->dims[std::size_t(a)];
   }
-  const std::size_t ncells = std::size_t(m_dims[0]) * std::size_t(m_dims[1]) * std::size_t(m_dims[2]);
+  m_geo = geo;  // cell_range reads the grid through m_geo
+  const auto& dims = geo->dims;
+  const std::size_t ncells = std::size_t(dims[0]) * std::size_t(dims[1]) * std::size_t(dims[2]);
   auto cell_index = [&](int i, int j, int k) {
-    return (std::size_t(k) * std::size_t(m_dims[1]) + std::size_t(j)) * std::size_t(m_dims[0]) + std::size_t(i);
+    return (std::size_t(k) * std::size_t(dims[1]) + std::size_t(j)) * std::size_t(dims[0]) + std::size_t(i);
   };
   // Two passes (count, fill) build the CSR lists; tets appear in ascending order in every cell.
-  m_cell_begin.assign(ncells + 1, 0);
+  geo->cell_begin.assign(ncells + 1, 0);
   for (int pass = 0; pass < 2; ++pass) {
     std::vector<int> fill;
     if (pass == 1) {
-      for (std::size_t c = 0; c < ncells; ++c) m_cell_begin[c + 1] += m_cell_begin[c];
-      m_cell_tets.resize(std::size_t(m_cell_begin[ncells]));
-      fill.assign(m_cell_begin.begin(), m_cell_begin.end() - 1);
+      for (std::size_t c = 0; c < ncells; ++c) geo->cell_begin[c + 1] += geo->cell_begin[c];
+      geo->cell_tets.resize(std::size_t(geo->cell_begin[ncells]));
+      fill.assign(geo->cell_begin.begin(), geo->cell_begin.end() - 1);
     }
     for (std::size_t t = 0; t < nt; ++t) {
       std::array<int, 3> lo{}, hi{};
-      cell_range(m_tet_box[t], lo, hi);
+      cell_range(geo->tet_box[t], lo, hi);
       for (int k = lo[2]; k <= hi[2]; ++k)
         for (int j = lo[1]; j <= hi[1]; ++j)
           for (int i = lo[0]; i <= hi[0]; ++i) {
             const std::size_t c = cell_index(i, j, k);
-            if (pass == 0) ++m_cell_begin[c + 1];
-            else m_cell_tets[std::size_t(fill[c]++)] = int(t);
+            if (pass == 0) ++geo->cell_begin[c + 1];
+            else geo->cell_tets[std::size_t(fill[c]++)] = int(t);
           }
     }
   }
+
+  // Every tet is alive in the first revision.
+  m_alive.assign(nt, 1);
+  update_live_totals();
 }
 
-std::array<Vec3, 4> MaterialGraph::tet(int t) const {
-  const auto& q = m_mesh.tets[std::size_t(t)];
-  return {m_mesh.vertices[std::size_t(q[0])], m_mesh.vertices[std::size_t(q[1])],
-          m_mesh.vertices[std::size_t(q[2])], m_mesh.vertices[std::size_t(q[3])]};
+MaterialGraph::MaterialGraph(Key, std::shared_ptr<const Geometry> geometry, std::vector<uint8_t> alive)
+    : m_geo(std::move(geometry)), m_alive(std::move(alive)) {
+  update_live_totals();
 }
+
+void MaterialGraph::update_live_totals() {
+  // Ascending order, so the volume is the same whatever sequence of removals led here.
+  m_num_alive = 0;
+  m_volume = 0.0;
+  m_bounds.min = Vec3::Constant(std::numeric_limits<double>::infinity());
+  m_bounds.max = -m_bounds.min;
+  for (std::size_t t = 0; t < m_alive.size(); ++t) {
+    if (!m_alive[t]) continue;
+    ++m_num_alive;
+    m_volume += m_geo->tet_volume[t];
+    m_bounds.min = m_bounds.min.cwiseMin(m_geo->tet_box[t].min);
+    m_bounds.max = m_bounds.max.cwiseMax(m_geo->tet_box[t].max);
+  }
+  if (m_num_alive == 0) m_bounds = m_geo->bounds;
+}
+
+std::shared_ptr<const MaterialGraph> MaterialGraph::without(std::span<const int> tets) const {
+  std::vector<uint8_t> alive = m_alive;
+  for (int t : tets) {
+    if (t < 0 || t >= num_tets_total())
+      throw std::invalid_argument("material graph: tet " + std::to_string(t) + " to remove is out of range [0, " +
+                                  std::to_string(num_tets_total()) + ")");
+    alive[std::size_t(t)] = 0;
+  }
+  return std::make_shared<const MaterialGraph>(Key{}, m_geo, std::move(alive));
+}
+
+const TetMesh& MaterialGraph::mesh() const { return m_geo->mesh; }
+
+TetMesh MaterialGraph::live_mesh() const {
+  TetMesh out;
+  out.vertices = m_geo->mesh.vertices;
+  out.tets.reserve(std::size_t(m_num_alive));
+  for (std::size_t t = 0; t < m_alive.size(); ++t)
+    if (m_alive[t]) out.tets.push_back(m_geo->mesh.tets[t]);
+  return out;
+}
+
+int MaterialGraph::num_tets_total() const { return int(m_geo->mesh.tets.size()); }
+
+double MaterialGraph::tet_volume(int t) const { return m_geo->tet_volume[std::size_t(t)]; }
+
+std::array<Vec3, 4> MaterialGraph::tet(int t) const { return m_geo->tet(t); }
 
 void MaterialGraph::cell_range(const Box3& box, std::array<int, 3>& lo, std::array<int, 3>& hi) const {
+  const Geometry& g = *m_geo;
   for (int a = 0; a < 3; ++a) {
-    const double l = std::floor((box.min[a] - m_bounds.min[a]) / m_cell[a]);
-    const double u = std::floor((box.max[a] - m_bounds.min[a]) / m_cell[a]);
-    lo[std::size_t(a)] = int(std::clamp(l, 0.0, double(m_dims[std::size_t(a)] - 1)));
-    hi[std::size_t(a)] = int(std::clamp(u, 0.0, double(m_dims[std::size_t(a)] - 1)));
+    const double l = std::floor((box.min[a] - g.bounds.min[a]) / g.cell[a]);
+    const double u = std::floor((box.max[a] - g.bounds.min[a]) / g.cell[a]);
+    lo[std::size_t(a)] = int(std::clamp(l, 0.0, double(g.dims[std::size_t(a)] - 1)));
+    hi[std::size_t(a)] = int(std::clamp(u, 0.0, double(g.dims[std::size_t(a)] - 1)));
   }
 }
 
 std::vector<int> MaterialGraph::tets_near(const Box3& box) const {
+  const Geometry& g = *m_geo;
   std::vector<int> out;
+  if (m_num_alive == 0) return out;
   if ((box.max.array() < m_bounds.min.array()).any() || (box.min.array() > m_bounds.max.array()).any()) return out;
   std::array<int, 3> lo{}, hi{};
   cell_range(box, lo, hi);
   const std::size_t cells = std::size_t(hi[0] - lo[0] + 1) * std::size_t(hi[1] - lo[1] + 1) *
                             std::size_t(hi[2] - lo[2] + 1);
-  // A box covering most of the grid: test every tet directly instead of gathering duplicates.
   auto overlaps = [&](int t) {
-    const Box3& b = m_tet_box[std::size_t(t)];
+    if (!m_alive[std::size_t(t)]) return false;
+    const Box3& b = g.tet_box[std::size_t(t)];
     return (b.max.array() >= box.min.array()).all() && (b.min.array() <= box.max.array()).all();
   };
-  if (cells * 4 > m_cell_begin.size()) {
-    for (int t = 0; t < num_tets(); ++t)
+  // A box covering most of the grid: test every tet directly instead of gathering duplicates.
+  if (cells * 4 > g.cell_begin.size()) {
+    for (int t = 0; t < num_tets_total(); ++t)
       if (overlaps(t)) out.push_back(t);
     return out;
   }
@@ -276,9 +349,9 @@ std::vector<int> MaterialGraph::tets_near(const Box3& box) const {
     for (int j = lo[1]; j <= hi[1]; ++j)
       for (int i = lo[0]; i <= hi[0]; ++i) {
         const std::size_t c =
-            (std::size_t(k) * std::size_t(m_dims[1]) + std::size_t(j)) * std::size_t(m_dims[0]) + std::size_t(i);
-        for (int n = m_cell_begin[c]; n < m_cell_begin[c + 1]; ++n)
-          if (overlaps(m_cell_tets[std::size_t(n)])) out.push_back(m_cell_tets[std::size_t(n)]);
+            (std::size_t(k) * std::size_t(g.dims[1]) + std::size_t(j)) * std::size_t(g.dims[0]) + std::size_t(i);
+        for (int n = g.cell_begin[c]; n < g.cell_begin[c + 1]; ++n)
+          if (overlaps(g.cell_tets[std::size_t(n)])) out.push_back(g.cell_tets[std::size_t(n)]);
       }
   std::sort(out.begin(), out.end());
   out.erase(std::unique(out.begin(), out.end()), out.end());
@@ -289,11 +362,11 @@ double MaterialGraph::occupancy(const Box3& box) const {
   const double bv = box.volume();
   if (!(bv > 0.0)) return 0.0;
   double v = 0.0;
-  // Tets in ascending order: the sum is deterministic.
+  // Live tets in ascending order: the sum is deterministic.
   for (int t : tets_near(box)) {
-    const Box3& b = m_tet_box[std::size_t(t)];
+    const Box3& b = m_geo->tet_box[std::size_t(t)];
     if ((b.min.array() >= box.min.array()).all() && (b.max.array() <= box.max.array()).all())
-      v += m_tet_volume[std::size_t(t)];
+      v += m_geo->tet_volume[std::size_t(t)];
     else
       v += clip_tet_box_volume(tet(t), box);
   }

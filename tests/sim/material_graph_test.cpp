@@ -2,6 +2,7 @@
 // tet configurations, and the octree built from M against the exact box material.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <random>
 
 #include "octocut/sim/material_graph.hpp"
@@ -180,6 +181,104 @@ TEST(MaterialGraph, RejectsBadInput) {
   // A negatively oriented tet is reoriented, not rejected.
   m.tets = {{0, 2, 1, 3}};
   EXPECT_NEAR(MaterialGraph(m).volume(), 1.0 / 6.0, 1e-16);
+}
+
+
+// ---------------------------------------------------------------------------------------------------------------
+// Removing tets (cut stage 3): MaterialGraph::without.
+
+TEST(MaterialGraphWithout, OccupancyDropsByExactlyTheClippedVolumeOfTheRemovedTets) {
+  const Box3 box{Vec3(0.0, 0.0, 0.0), Vec3(0.04, 0.03, 0.02)};
+  // Jitter small enough that no tet inverts: the tets tile the box without overlap, so no occupancy is clamped.
+  const MaterialGraph g(kuhn_box(box, 6, 0.1, 5));
+  ASSERT_NEAR(g.volume(), box.volume(), 1e-12 * box.volume());
+  // Remove the tets near a small region and every 7th tet elsewhere.
+  std::vector<int> removed = g.tets_near(Box3{Vec3(0.01, 0.01, 0.005), Vec3(0.02, 0.015, 0.01)});
+  for (int t = 0; t < g.num_tets_total(); t += 7) removed.push_back(t);
+  std::sort(removed.begin(), removed.end());
+  removed.erase(std::unique(removed.begin(), removed.end()), removed.end());
+  const auto h = g.without(removed);
+  EXPECT_EQ(h->num_tets(), g.num_tets() - int(removed.size()));
+  EXPECT_EQ(h->num_tets_total(), g.num_tets_total());
+  double removed_volume = 0.0;
+  for (int t : removed) removed_volume += g.tet_volume(t);
+  EXPECT_NEAR(h->volume(), g.volume() - removed_volume, 1e-15);
+  // Octree-like cells of two sizes, unaligned with the tets.
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(-0.005, 0.04);
+  for (int n = 0; n < 200; ++n) {
+    const Vec3 lo(u(rng), u(rng), u(rng));
+    const Box3 cell{lo, lo + Vec3::Constant(n % 2 ? 0.004 : 0.011)};
+    double clipped = 0.0;
+    for (int t : removed) clipped += clip_tet_box_volume(g.tet(t), cell);
+    EXPECT_NEAR((g.occupancy(cell) - h->occupancy(cell)) * cell.volume(), clipped, 1e-12 * cell.volume())
+        << "cell " << n;
+  }
+  for (int t = 0; t < g.num_tets_total(); ++t)
+    ASSERT_EQ(h->alive(t), !std::binary_search(removed.begin(), removed.end(), t));
+}
+
+TEST(MaterialGraphWithout, FaceConnectivityDropsWhenTheOnlyTetsMeetingTheFaceAreRemoved) {
+  // Two tets sharing the triangle (0,0,0), (0,1,0), (0,0,1) in the plane x = 0, and one tet far away.
+  TetMesh m;
+  m.vertices = {Vec3(0, 0, 0), Vec3(0, 1, 0), Vec3(0, 0, 1), Vec3(-1, 0, 0), Vec3(1, 0, 0),
+                Vec3(5, 5, 5), Vec3(6, 5, 5), Vec3(5, 6, 5), Vec3(5, 5, 6)};
+  m.tets = {{0, 1, 2, 3}, {0, 1, 2, 4}, {5, 6, 7, 8}};
+  const auto g = std::make_shared<const MaterialGraph>(m);
+  const Box3 face{Vec3(0, -1, -1), Vec3(0, 2, 2)};
+  ASSERT_TRUE(g->face_connected(face, 0));
+  const std::vector<int> one{0}, both{0, 1}, far{2};
+  // Either tet alone still meets the face in its shared triangle.
+  EXPECT_TRUE(g->without(one)->face_connected(face, 0));
+  EXPECT_TRUE(g->without(far)->face_connected(face, 0));
+  EXPECT_FALSE(g->without(both)->face_connected(face, 0));
+  // Removal composes: removing the second from the graph without the first.
+  EXPECT_FALSE(g->without(one)->without(std::vector<int>{1})->face_connected(face, 0));
+  // The leaf on the +x side loses its material with tet 1.
+  const Box3 plus{Vec3(0, -1, -1), Vec3(1, 2, 2)};
+  EXPECT_GT(g->without(one)->occupancy(plus), 0.0);
+  EXPECT_EQ(g->without(std::vector<int>{1})->occupancy(plus), 0.0);
+}
+
+TEST(MaterialGraphWithout, TheOriginalIsUnchangedAndTheGeometryIsShared) {
+  const MaterialGraph g(kuhn_box(Box3{Vec3::Zero(), Vec3::Constant(0.01)}, 4, 0.2, 3));
+  const Box3 cell{Vec3::Constant(0.002), Vec3::Constant(0.006)};
+  const double occ = g.occupancy(cell), vol = g.volume();
+  const std::vector<int> near = g.tets_near(cell);
+  const auto h = g.without(near);
+  EXPECT_EQ(g.occupancy(cell), occ);
+  EXPECT_EQ(g.volume(), vol);
+  EXPECT_EQ(g.num_tets(), g.num_tets_total());
+  EXPECT_EQ(g.tets_near(cell), near);
+  EXPECT_EQ(h->occupancy(cell), 0.0);
+  EXPECT_TRUE(h->tets_near(cell).empty());
+  // The revision shares the mesh (same object), which therefore still lists every tet; live_mesh() lists the rest.
+  EXPECT_EQ(&h->mesh(), &g.mesh());
+  EXPECT_EQ(int(h->mesh().tets.size()), g.num_tets_total());
+  const TetMesh live = h->live_mesh();
+  EXPECT_EQ(int(live.tets.size()), h->num_tets());
+  EXPECT_NEAR(MaterialGraph(live).volume(), h->volume(), 1e-18);
+  // Duplicates and tets already dead are fine; an index out of range is not.
+  const std::vector<int> again{near[0], near[0]};
+  EXPECT_EQ(h->without(again)->num_tets(), h->num_tets());
+  EXPECT_THROW((void)g.without(std::vector<int>{g.num_tets_total()}), std::invalid_argument);
+  EXPECT_THROW((void)g.without(std::vector<int>{-1}), std::invalid_argument);
+}
+
+TEST(MaterialGraphWithout, RemovingEverythingLeavesNoMaterial) {
+  const Box3 box{Vec3::Zero(), Vec3(0.02, 0.01, 0.01)};
+  const MaterialGraph g(kuhn_box(box, 3, 0.2, 1));
+  std::vector<int> all(std::size_t(g.num_tets_total()));
+  for (int t = 0; t < g.num_tets_total(); ++t) all[std::size_t(t)] = t;
+  const auto h = g.without(all);
+  EXPECT_EQ(h->num_tets(), 0);
+  EXPECT_EQ(h->volume(), 0.0);
+  EXPECT_EQ(h->occupancy(box), 0.0);
+  EXPECT_FALSE(h->face_connected(Box3{Vec3(0.01, 0, 0), Vec3(0.01, 0.01, 0.01)}, 0));
+  EXPECT_TRUE(h->tets_near(box).empty());
+  EXPECT_TRUE((h->bounds().min.array() <= h->bounds().max.array()).all());
+  // ... and the full graph still fills the box.
+  EXPECT_NEAR(g.occupancy(box), 1.0, 1e-12);
 }
 
 }  // namespace

@@ -4,6 +4,8 @@
 // face in positive area). Generation by CGAL Mesh_3 lives in cutting/; this header knows no CGAL.
 #include <array>
 #include <cstdint>
+#include <memory>
+#include <span>
 #include <vector>
 
 #include "octocut/sim/material.hpp"
@@ -27,8 +29,16 @@ double clip_tet_box_volume(const std::array<Vec3, 4>& tet, const Box3& box);
 double tet_face_section_area(const std::array<Vec3, 4>& tet, const Box3& face, int axis);
 
 /// M as a material source: occupancy and connectivity of octree cells, answered through a uniform grid over the
-/// tets. Immutable once built; a cut (the cutting issue) makes a new graph without the removed tets.
+/// tets. Immutable once built. A cut (SPEC §4 stage 3) makes a new graph with `without()`: the geometry (tets,
+/// their bounding boxes and volumes, the grid) is shared between the revisions and only a per-tet alive mask is
+/// copied. Tet indices refer to the original mesh in every revision; dead tets take no part in any query.
 class MaterialGraph final : public MaterialSource {
+  struct Geometry;
+  // Passkey: only members can name and construct it, so only without() calls the revision constructor.
+  struct Key {
+    explicit Key() = default;
+  };
+
  public:
   /// Takes the mesh; reorients negatively oriented tets and drops tets of zero volume. Throws
   /// std::invalid_argument for an empty mesh, an index out of range or non-finite coordinates.
@@ -36,29 +46,47 @@ class MaterialGraph final : public MaterialSource {
 
   [[nodiscard]] double occupancy(const Box3& box) const override;
   [[nodiscard]] bool face_connected(const Box3& face, int axis) const override;
+  /// Bounding box of the live tets, m. With no live tet left, the bounding box of all tets (never inverted).
   [[nodiscard]] Box3 bounds() const override { return m_bounds; }
 
-  [[nodiscard]] const TetMesh& mesh() const { return m_mesh; }
-  [[nodiscard]] int num_tets() const { return int(m_mesh.tets.size()); }
-  /// Sum of the tet volumes, m^3.
+  /// The whole mesh as built, dead tets included (tet t of the mesh is tet t of every query).
+  [[nodiscard]] const TetMesh& mesh() const;
+  /// A copy of the mesh with the live tets only (all vertices kept, unused ones included), in ascending order.
+  [[nodiscard]] TetMesh live_mesh() const;
+  /// Number of live tets.
+  [[nodiscard]] int num_tets() const { return m_num_alive; }
+  /// Number of tets in the mesh as built, live or dead; tet indices run over [0, num_tets_total()).
+  [[nodiscard]] int num_tets_total() const;
+  /// True when tet t (in [0, num_tets_total())) has not been removed.
+  [[nodiscard]] bool alive(int t) const { return m_alive[std::size_t(t)] != 0; }
+  /// Sum of the volumes of the live tets, m^3 (summed in ascending tet order).
   [[nodiscard]] double volume() const { return m_volume; }
-  /// Indices of the tets whose bounding box overlaps `box` (closed boxes), ascending.
+  /// Indices of the live tets whose bounding box overlaps `box` (closed boxes), ascending.
   [[nodiscard]] std::vector<int> tets_near(const Box3& box) const;
+  /// Corner positions of tet t (live or dead), m, positively oriented.
   [[nodiscard]] std::array<Vec3, 4> tet(int t) const;
+  /// Volume of tet t (live or dead), m^3.
+  [[nodiscard]] double tet_volume(int t) const;
+
+  /// A new revision of M without the tets `tets` (indices into the mesh as built, any order, duplicates and tets
+  /// already dead allowed). Shares the geometry with this graph, so the cost is O(|T|) bytes copied plus the
+  /// removal list; this graph is unchanged. Throws std::invalid_argument for an index out of range.
+  [[nodiscard]] std::shared_ptr<const MaterialGraph> without(std::span<const int> tets) const;
+
+  /// Revision constructor used by without(); not for general use (Key is private).
+  MaterialGraph(Key, std::shared_ptr<const Geometry> geometry, std::vector<uint8_t> alive);
 
  private:
   // Grid cells overlapped by a box, clamped to the grid: [lo, hi] per axis.
   void cell_range(const Box3& box, std::array<int, 3>& lo, std::array<int, 3>& hi) const;
+  // Recomputes the live count, volume and bounds from the alive mask.
+  void update_live_totals();
 
-  TetMesh m_mesh;
-  std::vector<Box3> m_tet_box;        ///< bounding box of each tet, m (|T|)
-  std::vector<double> m_tet_volume;   ///< m^3 (|T|)
-  double m_volume = 0.0;              ///< m^3
-  Box3 m_bounds;                      ///< m
-  std::array<int, 3> m_dims{1, 1, 1}; ///< grid cells per axis
-  Vec3 m_cell = Vec3::Ones();         ///< grid cell edge per axis, m
-  std::vector<int> m_cell_begin;      ///< CSR offsets into m_cell_tets (cells + 1)
-  std::vector<int> m_cell_tets;       ///< tet indices per grid cell
+  std::shared_ptr<const Geometry> m_geo;  ///< immutable geometry shared by all revisions
+  std::vector<uint8_t> m_alive;           ///< 1 for a live tet, 0 for a removed one (|T| as built)
+  int m_num_alive = 0;                    ///< number of live tets
+  double m_volume = 0.0;                  ///< volume of the live tets, m^3
+  Box3 m_bounds;                          ///< bounding box of the live tets, m
 };
 
 }  // namespace octocut::sim

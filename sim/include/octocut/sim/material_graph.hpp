@@ -49,6 +49,10 @@ class MaterialGraph final : public MaterialSource {
  private:
   // Grid cells overlapped by a box, clamped to the grid: [lo, hi] per axis.
   void cell_range(const Box3& box, std::array<int, 3>& lo, std::array<int, 3>& hi) const;
+  // Calls visit(t) once for each tet whose bounding box overlaps `box` (closed boxes), in grid order, until visit
+  // returns true; returns whether it did.
+  template <class Visit>
+  bool visit_tets_near(const Box3& box, Visit&& visit) const;
 
   TetMesh m_mesh;
   std::vector<Box3> m_tet_box;        ///< bounding box of each tet, m (|T|)
@@ -59,6 +63,7 @@ class MaterialGraph final : public MaterialSource {
   Vec3 m_cell = Vec3::Ones();         ///< grid cell edge per axis, m
   std::vector<int> m_cell_begin;      ///< CSR offsets into m_cell_tets (cells + 1)
   std::vector<int> m_cell_tets;       ///< tet indices per grid cell
+  std::vector<std::array<int, 3>> m_tet_cell;  ///< lowest grid cell of each tet's range, per axis (|T|)
 };
 
 }  // namespace octocut::sim

@@ -180,9 +180,13 @@ struct SimState {
   static SimState rest(const ObjectModel& model);
 };
 
-/// Carries a state over to a new revision of the model: each new DOF takes the deformed position and velocity that
-/// the old model interpolates at its node, inside the old leaf that contains (or equals) one of its leaves. A split
-/// DOF thus inherits its parent's state, and refinement never makes the object jump.
+/// Carries a state over to a new revision of the model (refined, with_material, without_leaves, or a chain of
+/// them): each new DOF takes the deformed position and velocity that the old model interpolates at its node inside
+/// the old leaf that equals or contains the leaf of the DOF's own slot (DofMap::dof_slot). That leaf lies on the
+/// DOF's side of every cut, so a DOF that a node split creates inherits the state of its parent (the old DOF, or
+/// the old hard-bound slot value, of that leaf at that node) and never an average across the cut; refinement
+/// never makes the object jump; and with the same leaves (with_material) every slot keeps its old position.
+/// A new leaf that no old leaf contains (only a coarsening would make one) falls back to any old leaf at the node.
 SimState transfer_state(const ObjectModel& from, const SimState& state, const ObjectModel& to);
 
 }  // namespace octocut::sim

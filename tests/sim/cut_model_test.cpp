@@ -165,6 +165,51 @@ TEST(CutModel, OnlyLeavesMeetingTheChangedBoxesChange) {
   EXPECT_EQ(halves, 2 * 8 * 2);
 }
 
+TEST(CutModel, ARevisionWithNothingChangedEqualsItsModelFieldByField) {
+  // with_material and without_leaves build the next revision from parts (not by copying the model), so every
+  // field must come across: the same material with nothing changed, or no leaf removed, is the same model.
+  HandleSpec handle;
+  handle.box = {Vec3(-1, -1, -1), Vec3(0.05, 2, 2)};
+  handle.keyframes = {{1.0, Vec3(0.01, 0, 0), Vec3(0, 0, 10)}};
+  MaterialParams params;
+  params.young_modulus = 3e4;
+  params.poisson_ratio = 0.42;
+  params.density = 1100.0;
+  params.rayleigh_mass = 0.1;
+  params.rayleigh_stiffness = 0.01;
+  OctreeSpec spec;
+  spec.root = {Vec3(-0.1, -0.1, -0.1), 1.2};
+  spec.base_level = 3;
+  spec.max_level = 7;
+  spec.refine = {{Box3{Vec3(0.5, 0.5, 0), Vec3(0.6, 0.6, 0.1)}, 5}};
+  const auto material = slab([](int, int, int) { return true; });
+  const ObjectModel m = ObjectModel::build(spec, material, params, {handle});
+  for (const ObjectModel& r : {m.with_material(material, {}), m.without_leaves({})}) {
+    EXPECT_EQ(r.revision(), m.revision() + 1);
+    EXPECT_EQ(&r.material(), &m.material());
+    EXPECT_EQ(r.root().min, m.root().min);
+    EXPECT_EQ(r.root().size, m.root().size);
+    EXPECT_EQ(r.max_level(), m.max_level());
+    EXPECT_EQ(r.params().young_modulus, m.params().young_modulus);
+    EXPECT_EQ(r.params().poisson_ratio, m.params().poisson_ratio);
+    EXPECT_EQ(r.params().density, m.params().density);
+    EXPECT_EQ(r.params().rayleigh_mass, m.params().rayleigh_mass);
+    EXPECT_EQ(r.params().rayleigh_stiffness, m.params().rayleigh_stiffness);
+    ASSERT_EQ(r.handles().size(), 1u);
+    EXPECT_EQ(r.handles()[0].keyframes.size(), 1u);
+    EXPECT_EQ(r.handle_position(0, 1.0), m.handle_position(0, 1.0));
+    EXPECT_EQ(r.tree().leaves(), m.tree().leaves());
+    EXPECT_EQ(r.occupancy(), m.occupancy());
+    EXPECT_EQ(r.edge(), m.edge());
+    EXPECT_EQ(r.stiffness_scale(), m.stiffness_scale());
+    EXPECT_EQ(r.dof_mass(), m.dof_mass());
+    EXPECT_EQ(r.dof_handle(), m.dof_handle());
+    EXPECT_EQ(r.slot_rest(), m.slot_rest());
+    EXPECT_EQ(r.unit_stiffness(), m.unit_stiffness());
+    expect_same(r.dofs(), m.dofs());
+  }
+}
+
 TEST(CutModel, LeavesThatLoseAllMaterialAreDropped) {
   const ObjectModel m = slab_model();
   // Remove x in [1/4, 1/2) entirely: the two columns of leaves there empty out.

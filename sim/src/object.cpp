@@ -18,12 +18,6 @@ Mat3 euler_xyz(const Vec3& deg) {
       .toRotationMatrix();
 }
 
-// A leaf together with the material fraction it holds.
-struct OccupiedCell {
-  Cell cell;
-  double occupancy = 0.0;
-};
-
 }  // namespace
 
 Vec3 HandleSpec::position(const Vec3& X, double t) const {
@@ -91,11 +85,8 @@ ObjectModel ObjectModel::build(const OctreeSpec& spec, std::shared_ptr<const Mat
   }
   if (leaves.empty()) throw std::invalid_argument("ObjectModel::build: the material does not meet the octree root");
 
-  std::vector<Cell> cells;
-  cells.reserve(leaves.size());
-  for (const auto& l : leaves) cells.push_back(l.cell);
-  m.m_tree = Octree(std::move(cells));
-  m.finish(nullptr);
+  m.set_leaves(std::move(leaves));
+  m.finish(nullptr, {});
   return m;
 }
 
@@ -105,32 +96,119 @@ ObjectModel ObjectModel::refined(const std::vector<int>& leaves) const {
     if (i < 0 || i >= num_elements()) throw std::out_of_range("ObjectModel::refined: leaf index out of range");
     if (m_tree.leaf(i).level < m_max_level) split[std::size_t(i)] = 1;
   }
-  std::vector<Cell> cells;
+  // Kept leaves keep their occupancy (the material is the same); children are measured once, here.
+  std::vector<OccupiedCell> cells;
   cells.reserve(m_tree.leaves().size() + 7 * leaves.size());
   for (int i = 0; i < num_elements(); ++i) {
     const Cell& c = m_tree.leaf(i);
     if (!split[std::size_t(i)]) {
-      cells.push_back(c);
+      cells.push_back({c, m_occupancy[std::size_t(i)]});
       continue;
     }
     for (int k = 0; k < 8; ++k) {
       const Cell ch = c.child(k);
-      if (m_material->occupancy(m_root.cell_box(ch)) >= kEmptyOccupancy) cells.push_back(ch);
+      const double occ = m_material->occupancy(m_root.cell_box(ch));
+      if (occ >= kEmptyOccupancy) cells.push_back({ch, occ});
     }
   }
-  ObjectModel m = *this;
-  m.m_tree = Octree(std::move(cells));
-  m.m_revision = m_revision + 1;
-  m.finish(this);
+  ObjectModel m = next_revision(m_material);
+  m.set_leaves(std::move(cells));
+  m.finish(this, {});
   return m;
 }
 
-void ObjectModel::finish(const ObjectModel* previous) {
-  const int ne = m_tree.size();
-  m_unit_k = unit_hex_stiffness(m_params.poisson_ratio);
+ObjectModel ObjectModel::with_material(std::shared_ptr<const MaterialSource> material,
+                                       const std::vector<Box3>& changed) const {
+  if (!material) throw std::invalid_argument("ObjectModel::with_material: no material");
+  // A leaf is touched when its closed box meets a changed box (grown by a round-off margin), so that a change
+  // that only reaches a leaf's face still redoes the connectivity across that face.
+  const double eps = 1e-9 * m_root.size;
+  Box3 all;  // bounding box of the changed boxes, for a quick reject
+  if (!changed.empty()) {
+    all = changed.front();
+    for (const Box3& b : changed) {
+      all.min = all.min.cwiseMin(b.min);
+      all.max = all.max.cwiseMax(b.max);
+    }
+  }
+  auto meets = [eps](const Box3& a, const Box3& b) {
+    return (a.min.array() <= b.max.array() + eps).all() && (b.min.array() <= a.max.array() + eps).all();
+  };
 
-  // Per-element geometry, occupancy and stiffness scale.
-  m_occupancy.resize(std::size_t(ne));
+  // Touched leaves are measured anew and dropped when empty; every other leaf keeps its occupancy.
+  std::vector<OccupiedCell> cells;
+  std::vector<Cell> touched;
+  cells.reserve(m_tree.leaves().size());
+  for (int i = 0; i < num_elements(); ++i) {
+    const Cell& c = m_tree.leaf(i);
+    const Box3 box = m_root.cell_box(c);
+    const bool hit = !changed.empty() && meets(box, all) &&
+                     std::any_of(changed.begin(), changed.end(), [&](const Box3& b) { return meets(box, b); });
+    if (!hit) {
+      cells.push_back({c, m_occupancy[std::size_t(i)]});
+      continue;
+    }
+    touched.push_back(c);
+    const double occ = material->occupancy(box);
+    if (occ >= kEmptyOccupancy) cells.push_back({c, occ});
+  }
+  if (cells.empty()) throw std::invalid_argument("ObjectModel::with_material: no material is left in the octree");
+
+  ObjectModel m = next_revision(std::move(material));
+  m.set_leaves(std::move(cells));
+  m.finish(this, touched);
+  return m;
+}
+
+ObjectModel ObjectModel::without_leaves(const std::vector<int>& leaves) const {
+  std::vector<char> drop(std::size_t(num_elements()), 0);
+  for (int i : leaves) {
+    if (i < 0 || i >= num_elements()) throw std::out_of_range("ObjectModel::without_leaves: leaf index out of range");
+    drop[std::size_t(i)] = 1;
+  }
+  std::vector<OccupiedCell> cells;
+  cells.reserve(m_tree.leaves().size());
+  for (int i = 0; i < num_elements(); ++i)
+    if (!drop[std::size_t(i)]) cells.push_back({m_tree.leaf(i), m_occupancy[std::size_t(i)]});
+  if (cells.empty()) throw std::invalid_argument("ObjectModel::without_leaves: every element would be removed");
+
+  ObjectModel m = next_revision(m_material);
+  m.set_leaves(std::move(cells));
+  m.finish(this, {});
+  return m;
+}
+
+ObjectModel ObjectModel::next_revision(std::shared_ptr<const MaterialSource> material) const {
+  ObjectModel m;
+  m.m_root = m_root;
+  m.m_material = std::move(material);
+  m.m_params = m_params;
+  m.m_handles = m_handles;
+  m.m_max_level = m_max_level;
+  m.m_revision = m_revision + 1;
+  m.m_unit_k = m_unit_k;
+  return m;
+}
+
+void ObjectModel::set_leaves(std::vector<OccupiedCell> cells) {
+  // Octree keeps cells that come in Morton order as they are; sort here otherwise so occupancy stays aligned.
+  auto by_code = [](const OccupiedCell& a, const OccupiedCell& b) { return a.cell.morton() < b.cell.morton(); };
+  if (!std::is_sorted(cells.begin(), cells.end(), by_code)) std::sort(cells.begin(), cells.end(), by_code);
+  std::vector<Cell> leaves;
+  leaves.reserve(cells.size());
+  m_occupancy.resize(cells.size());
+  for (std::size_t i = 0; i < cells.size(); ++i) {
+    leaves.push_back(cells[i].cell);
+    m_occupancy[i] = cells[i].occupancy;
+  }
+  m_tree = Octree(std::move(leaves));
+}
+
+void ObjectModel::finish(const ObjectModel* previous, const std::vector<Cell>& material_changed) {
+  const int ne = m_tree.size();
+  if (!previous) m_unit_k = unit_hex_stiffness(m_params.poisson_ratio);
+
+  // Per-element geometry and stiffness scale; the occupancy was set with the leaves.
   m_edge.resize(std::size_t(ne));
   m_k_scale.resize(std::size_t(ne));
   m_slot_rest.resize(8 * std::size_t(ne));
@@ -138,17 +216,15 @@ void ObjectModel::finish(const ObjectModel* previous) {
     const Cell& c = m_tree.leaf(e);
     const double h = m_root.cell_edge(c);
     m_edge[std::size_t(e)] = h;
-    // Leaves kept from the previous revision keep their occupancy (the material is the same).
-    const int kept = previous ? previous->m_tree.find(c) : -1;
-    m_occupancy[std::size_t(e)] = kept >= 0 ? previous->m_occupancy[std::size_t(kept)]
-                                            : m_material->occupancy(m_root.cell_box(c));
     m_k_scale[std::size_t(e)] = m_params.young_modulus * m_occupancy[std::size_t(e)] * h;
     for (int k = 0; k < 8; ++k) m_slot_rest[8 * std::size_t(e) + std::size_t(k)] = m_root.to_world(c.corner(k));
   }
 
-  // DOFs by node splitting and hard binding; debug builds check the invariants of SPEC §2.3 on every revision.
-  m_dofs = previous ? update_dof_map(previous->m_dofs, previous->m_tree, m_tree, m_root, *m_material, {})
-                    : build_dof_map(m_tree, m_root, *m_material);
+  // DOFs by node splitting and hard binding, redone locally around added, removed and material-changed leaves;
+  // debug builds check the invariants of SPEC §2.3 on every revision.
+  m_dofs = previous
+               ? update_dof_map(previous->m_dofs, previous->m_tree, m_tree, m_root, *m_material, material_changed)
+               : build_dof_map(m_tree, m_root, *m_material);
   assert(m_dofs.check_invariants().empty());
 
   // Lumped mass rho phi h^3 / 8 per slot, gathered to DOFs through P^T.
@@ -212,6 +288,57 @@ SimState SimState::rest(const ObjectModel& model) {
   s.x = model.dofs().dof_rest;
   s.v.assign(s.x.size(), Vec3::Zero());
   return s;
+}
+
+std::vector<int> element_components(const ObjectModel& model, int& count) {
+  const DofMap& dm = model.dofs();
+  const int ne = model.num_elements();
+  // Union-find over elements; each DOF remembers the first element that references it.
+  std::vector<int> parent(static_cast<std::size_t>(ne));
+  for (int e = 0; e < ne; ++e) parent[std::size_t(e)] = e;
+  auto find = [&parent](int a) {
+    while (parent[std::size_t(a)] != a) a = parent[std::size_t(a)] = parent[std::size_t(parent[std::size_t(a)])];
+    return a;
+  };
+  std::vector<int> owner(std::size_t(dm.num_dofs), -1);
+  for (int s = 0; s < dm.num_slots(); ++s) {
+    const int e = s / 8;
+    for (int i = dm.slot_begin[std::size_t(s)]; i < dm.slot_begin[std::size_t(s) + 1]; ++i) {
+      int& o = owner[std::size_t(dm.slot_dof[std::size_t(i)])];
+      if (o < 0) {
+        o = e;
+        continue;
+      }
+      const int a = find(e), b = find(o);
+      if (a != b) parent[std::size_t(std::max(a, b))] = std::min(a, b);
+    }
+  }
+  // Number the components by their smallest element.
+  std::vector<int> comp(std::size_t(ne), -1), label(std::size_t(ne), -1);
+  count = 0;
+  for (int e = 0; e < ne; ++e) {
+    int& l = label[std::size_t(find(e))];
+    if (l < 0) l = count++;
+    comp[std::size_t(e)] = l;
+  }
+  return comp;
+}
+
+std::vector<ComponentInfo> component_info(const ObjectModel& model, const std::vector<int>& comp, int count) {
+  if (comp.size() != std::size_t(model.num_elements()))
+    throw std::invalid_argument("component_info: need one component per element");
+  const DofMap& dm = model.dofs();
+  std::vector<ComponentInfo> info(std::size_t(std::max(count, 0)));
+  for (int e = 0; e < model.num_elements(); ++e) {
+    const int c = comp[std::size_t(e)];
+    if (c < 0 || c >= count) throw std::out_of_range("component_info: component index out of range");
+    ComponentInfo& ci = info[std::size_t(c)];
+    ++ci.elements;
+    ci.volume += model.occupancy()[std::size_t(e)] * std::pow(model.edge()[std::size_t(e)], 3);
+    for (int i = dm.slot_begin[8 * std::size_t(e)]; i < dm.slot_begin[8 * std::size_t(e) + 8]; ++i)
+      if (model.dof_handle()[std::size_t(dm.slot_dof[std::size_t(i)])] >= 0) ci.anchored = true;
+  }
+  return info;
 }
 
 SimState transfer_state(const ObjectModel& from, const SimState& state, const ObjectModel& to) {

@@ -169,6 +169,44 @@ TEST(MaterialGraphOccupancy, OctreeFromTetsOfABoxMatchesTheExactBoxMaterial) {
   EXPECT_NEAR(a.volume(), box.volume(), 1e-12 * box.volume());
 }
 
+TEST(MaterialGraph, GridQueriesMatchBruteForce) {
+  // tets_near and face_connected go through the grid (each tet filed in several cells, reported once); brute
+  // force tests every tet. Random boxes and faces of random sizes, some aligned with the Kuhn grid's planes.
+  const Box3 box{Vec3(0.0, 0.0, 0.0), Vec3(0.06, 0.04, 0.05)};
+  for (const double jitter : {0.0, 0.3}) {
+    const MaterialGraph g(kuhn_box(box, 6, jitter, 5));
+    std::mt19937 rng(19);
+    std::uniform_real_distribution<double> u(-0.01, 0.07), size(0.0, 0.03);
+    for (int q = 0; q < 300; ++q) {
+      Box3 b;
+      b.min = Vec3(u(rng), u(rng), u(rng));
+      // Every third query snaps its corner to the tet grid (planes where tets meet), where ties are likeliest.
+      if (q % 3 == 0) b.min = (b.min / 0.01).array().round().matrix() * 0.01;
+      b.max = b.min + Vec3(size(rng), size(rng), size(rng));
+      std::vector<int> brute;
+      for (int t = 0; t < g.num_tets(); ++t) {
+        Vec3 lo = g.tet(t)[0], hi = lo;
+        for (const Vec3& p : g.tet(t)) {
+          lo = lo.cwiseMin(p);
+          hi = hi.cwiseMax(p);
+        }
+        if ((hi.array() >= b.min.array()).all() && (lo.array() <= b.max.array()).all()) brute.push_back(t);
+      }
+      ASSERT_EQ(g.tets_near(b), brute) << "query " << q;
+
+      // The face of b's lower side along a random axis.
+      const int axis = q % 3;
+      Box3 face = b;
+      face.max[axis] = face.min[axis];
+      const int v = (axis + 1) % 3, w = (axis + 2) % 3;
+      const double threshold = 1e-12 * (face.max[v] - face.min[v]) * (face.max[w] - face.min[w]);
+      bool connected = false;
+      for (int t = 0; t < g.num_tets(); ++t) connected = connected || tet_face_section_area(g.tet(t), face, axis) > threshold;
+      EXPECT_EQ(g.face_connected(face, axis), connected) << "query " << q;
+    }
+  }
+}
+
 TEST(MaterialGraph, RejectsBadInput) {
   TetMesh m;
   EXPECT_THROW(MaterialGraph{m}, std::invalid_argument);

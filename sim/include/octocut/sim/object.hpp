@@ -74,6 +74,21 @@ class ObjectModel {
   /// A new revision in which each listed leaf (by index) is replaced by its non-empty children.
   [[nodiscard]] ObjectModel refined(const std::vector<int>& leaves) const;
 
+  /// A new revision with the same leaves and a new material (e.g. M after a cut removed tets), for cutting stage 4
+  /// (SPEC §4). `changed` lists rest-space boxes, m, that cover every region where the material changed (their
+  /// union must hold each removed tet). Only leaves whose closed box meets one of them may change: their occupancy
+  /// is measured anew from `material`, those below kEmptyOccupancy are dropped, and the DOFs are rebuilt locally
+  /// around them (update_dof_map), so nodes split where the material no longer connects. Every other leaf keeps
+  /// its occupancy. The DOF map equals build_dof_map(tree(), root(), *material) of the result. Throws
+  /// std::invalid_argument for a null material or when no leaf would hold material. `*this` is left untouched.
+  [[nodiscard]] ObjectModel with_material(std::shared_ptr<const MaterialSource> material,
+                                          const std::vector<Box3>& changed) const;
+
+  /// A new revision without the listed leaves (by index; repeats allowed), e.g. a fragment that a cut separated.
+  /// The material is kept, the other leaves keep their occupancy, and the DOFs around the removed leaves are
+  /// rebuilt locally. Throws std::out_of_range for a bad index and std::invalid_argument when every leaf would go.
+  [[nodiscard]] ObjectModel without_leaves(const std::vector<int>& leaves) const;
+
   [[nodiscard]] const Octree& tree() const { return m_tree; }
   [[nodiscard]] const RootGeometry& root() const { return m_root; }
   [[nodiscard]] const DofMap& dofs() const { return m_dofs; }
@@ -108,9 +123,19 @@ class ObjectModel {
   [[nodiscard]] Vec3 evaluate(const PointEmbedding& e, const std::vector<Vec3>& slots) const;
 
  private:
-  // Occupancy-dependent data, DOFs, masses and handles. With the previous revision of the same material, kept
-  // leaves reuse their occupancy and the DOF map is updated locally.
-  void finish(const ObjectModel* previous);
+  // A leaf together with the material fraction it holds.
+  struct OccupiedCell {
+    Cell cell;
+    double occupancy = 0.0;  // [0, 1]
+  };
+  // An empty model that carries this one's root, parameters, handles and unit stiffness, with the given material
+  // and the next revision number.
+  [[nodiscard]] ObjectModel next_revision(std::shared_ptr<const MaterialSource> material) const;
+  // Sets the tree and the occupancy (sorted into Morton order together).
+  void set_leaves(std::vector<OccupiedCell> cells);
+  // Derived data of the leaves: geometry, stiffness scale, DOFs, masses and handles. With a previous revision the
+  // DOF map is updated locally: around added and removed leaves, and at the cells in `material_changed`.
+  void finish(const ObjectModel* previous, const std::vector<Cell>& material_changed);
 
   RootGeometry m_root;
   std::shared_ptr<const MaterialSource> m_material;
@@ -129,6 +154,22 @@ class ObjectModel {
   std::vector<Vec3> m_slot_rest;     ///< (8 * num_elements), m
 };
 
+/// Connected components of the elements: two elements are connected when their rows of P share a DOF (directly,
+/// or through a hard-bound slot). Returns comp (num_elements), comp[e] in [0, count), with components numbered in
+/// the order of their smallest element index.
+std::vector<int> element_components(const ObjectModel& model, int& count);
+
+/// What one connected component of the elements holds.
+struct ComponentInfo {
+  double volume = 0.0;    ///< material volume, sum of occupancy * h^3 over its elements, m^3
+  bool anchored = false;  ///< some DOF of its elements is driven by a handle
+  int elements = 0;       ///< number of elements
+};
+
+/// Volume, anchoring and size of each component `comp` (num_elements) numbers in [0, count), as from
+/// element_components. Returns (count).
+std::vector<ComponentInfo> component_info(const ObjectModel& model, const std::vector<int>& comp, int count);
+
 /// What changes from step to step (MuJoCo's mjData in spirit).
 struct SimState {
   double t = 0.0;                  ///< simulated time, s
@@ -139,9 +180,13 @@ struct SimState {
   static SimState rest(const ObjectModel& model);
 };
 
-/// Carries a state over to a new revision of the model: each new DOF takes the deformed position and velocity that
-/// the old model interpolates at its node, inside the old leaf that contains (or equals) one of its leaves. A split
-/// DOF thus inherits its parent's state, and refinement never makes the object jump.
+/// Carries a state over to a new revision of the model (refined, with_material, without_leaves, or a chain of
+/// them): each new DOF takes the deformed position and velocity that the old model interpolates at its node inside
+/// the old leaf that equals or contains the leaf of the DOF's own slot (DofMap::dof_slot). That leaf lies on the
+/// DOF's side of every cut, so a DOF that a node split creates inherits the state of its parent (the old DOF, or
+/// the old hard-bound slot value, of that leaf at that node) and never an average across the cut; refinement
+/// never makes the object jump; and with the same leaves (with_material) every slot keeps its old position.
+/// A new leaf that no old leaf contains (only a coarsening would make one) falls back to any old leaf at the node.
 SimState transfer_state(const ObjectModel& from, const SimState& state, const ObjectModel& to);
 
 }  // namespace octocut::sim

@@ -70,29 +70,37 @@ void clip_tets(const std::vector<Tet>& in, std::vector<Tet>& out, int axis, doub
 }
 
 // Area of a convex polygon in 2D by the shoelace formula (any orientation).
-double polygon_area(const std::vector<Eigen::Vector2d>& p) {
+template <class Points>
+double polygon_area(const Points& p, std::size_t n) {
   double s = 0.0;
-  for (std::size_t i = 0; i < p.size(); ++i) {
+  for (std::size_t i = 0; i < n; ++i) {
     const auto& a = p[i];
-    const auto& b = p[(i + 1) % p.size()];
+    const auto& b = p[(i + 1) % n];
     s += a.x() * b.y() - a.y() * b.x();
   }
   return 0.5 * std::abs(s);
 }
 
+// A convex polygon of at most 8 vertices in 2D (a tet's section has at most 4; each clip by a line adds at most 1).
+struct Polygon {
+  std::array<Eigen::Vector2d, 8> p;
+  std::size_t n = 0;
+  void push(const Eigen::Vector2d& v) { p[n++] = v; }
+};
+
 // Keeps the part of a convex polygon with sign * (p[k] − c) <= 0 (Sutherland–Hodgman against one line).
-std::vector<Eigen::Vector2d> clip_polygon(const std::vector<Eigen::Vector2d>& poly, int k, double c, double sign) {
-  std::vector<Eigen::Vector2d> out;
-  const std::size_t n = poly.size();
+Polygon clip_polygon(const Polygon& poly, int k, double c, double sign) {
+  Polygon out;
+  const std::size_t n = poly.n;
   for (std::size_t i = 0; i < n; ++i) {
-    const Eigen::Vector2d& a = poly[i];
-    const Eigen::Vector2d& b = poly[(i + 1) % n];
+    const Eigen::Vector2d& a = poly.p[i];
+    const Eigen::Vector2d& b = poly.p[(i + 1) % n];
     const double da = sign * (a[k] - c), db = sign * (b[k] - c);
-    if (da <= 0.0) out.push_back(a);
+    if (da <= 0.0) out.push(a);
     if ((da <= 0.0) != (db <= 0.0)) {
-      Eigen::Vector2d p = a + (da / (da - db)) * (b - a);
-      p[k] = c;
-      out.push_back(p);
+      Eigen::Vector2d q = a + (da / (da - db)) * (b - a);
+      q[k] = c;
+      out.push(q);
     }
   }
   return out;
@@ -135,32 +143,35 @@ double tet_face_section_area(const Tet& tet, const Box3& face, int axis) {
   // Section points: vertices on the plane and crossings of edges with vertices strictly on either side.
   std::array<double, 4> d{};
   for (int k = 0; k < 4; ++k) d[std::size_t(k)] = tet[std::size_t(k)][axis] - c;
-  std::vector<Eigen::Vector2d> pts;
+  Polygon pts;
   for (int k = 0; k < 4; ++k)
-    if (d[std::size_t(k)] == 0.0) pts.emplace_back(tet[std::size_t(k)][u], tet[std::size_t(k)][w]);
+    if (d[std::size_t(k)] == 0.0) pts.push({tet[std::size_t(k)][u], tet[std::size_t(k)][w]});
   for (int i = 0; i < 4; ++i) {
     for (int j = i + 1; j < 4; ++j) {
       const double di = d[std::size_t(i)], dj = d[std::size_t(j)];
       if ((di < 0.0 && dj > 0.0) || (di > 0.0 && dj < 0.0)) {
         const Vec3 p = tet[std::size_t(i)] + (di / (di - dj)) * (tet[std::size_t(j)] - tet[std::size_t(i)]);
-        pts.emplace_back(p[u], p[w]);
+        pts.push({p[u], p[w]});
       }
     }
   }
-  if (pts.size() < 3) return 0.0;
+  if (pts.n < 3) return 0.0;
   // Order the (at most four, convex) section points by angle about their centroid.
   Eigen::Vector2d m = Eigen::Vector2d::Zero();
-  for (const auto& p : pts) m += p;
-  m /= double(pts.size());
-  std::sort(pts.begin(), pts.end(), [&](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
-    return std::atan2(a.y() - m.y(), a.x() - m.x()) < std::atan2(b.y() - m.y(), b.x() - m.x());
-  });
+  for (std::size_t k = 0; k < pts.n; ++k) m += pts.p[k];
+  m /= double(pts.n);
+  std::array<std::pair<double, Eigen::Vector2d>, 4> by_angle;
+  for (std::size_t k = 0; k < pts.n; ++k)
+    by_angle[k] = {std::atan2(pts.p[k].y() - m.y(), pts.p[k].x() - m.x()), pts.p[k]};
+  std::sort(by_angle.begin(), by_angle.begin() + std::ptrdiff_t(pts.n),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (std::size_t k = 0; k < pts.n; ++k) pts.p[k] = by_angle[k].second;
   // Restrict to the face rectangle.
   pts = clip_polygon(pts, 0, face.min[u], -1.0);
-  if (pts.size() >= 3) pts = clip_polygon(pts, 0, face.max[u], 1.0);
-  if (pts.size() >= 3) pts = clip_polygon(pts, 1, face.min[w], -1.0);
-  if (pts.size() >= 3) pts = clip_polygon(pts, 1, face.max[w], 1.0);
-  return pts.size() >= 3 ? polygon_area(pts) : 0.0;
+  if (pts.n >= 3) pts = clip_polygon(pts, 0, face.max[u], 1.0);
+  if (pts.n >= 3) pts = clip_polygon(pts, 1, face.min[w], -1.0);
+  if (pts.n >= 3) pts = clip_polygon(pts, 1, face.max[w], 1.0);
+  return pts.n >= 3 ? polygon_area(pts.p, pts.n) : 0.0;
 }
 
 // The immutable part of M, shared by all revisions made by without().
@@ -173,6 +184,7 @@ struct MaterialGraph::Geometry {
   Vec3 cell = Vec3::Ones();         ///< grid cell edge per axis, m
   std::vector<int> cell_begin;      ///< CSR offsets into cell_tets (cells + 1)
   std::vector<int> cell_tets;       ///< tet indices per grid cell, ascending within a cell
+  std::vector<std::array<int, 3>> tet_cell;  ///< lowest grid cell of each tet's range, per axis (|T|)
 
   [[nodiscard]] Tet tet(int t) const {
     const auto& q = mesh.tets[std::size_t(t)];
@@ -226,9 +238,14 @@ MaterialGraph::MaterialGraph(TetMesh mesh) {
     geo->bounds.max = geo->bounds.max.cwiseMax(b.max);
   }
 
-  // Uniform grid with about one tet per cell: cell edge ~ cube root of the bounding volume per tet.
+  // Uniform grid with cells about as big as a tet's bounding box: the cube root of the bounding volume per tet,
+  // or the mean largest extent of the tets' boxes when that is bigger (a box holds ~6x its tet's volume). Finer
+  // cells would file every tet in dozens of cells, and each query would gather that many duplicates.
   const Vec3 ext = (geo->bounds.max - geo->bounds.min).cwiseMax(1e-12);
-  const double h = std::cbrt(ext.prod() / double(nt));
+  double mean_extent = 0.0;
+  for (const Box3& b : geo->tet_box) mean_extent += (b.max - b.min).maxCoeff();
+  mean_extent /= double(nt);
+  const double h = std::max(std::cbrt(ext.prod() / double(nt)), mean_extent);
   for (int a = 0; a < 3; ++a) {
     geo->dims[std::size_t(a)] = std::clamp(int(std::ceil(ext[a] / h)), 1, 256);
     geo->cell[a] = ext[a] / geo->dims[std::size_t(a)];
@@ -241,6 +258,7 @@ MaterialGraph::MaterialGraph(TetMesh mesh) {
   };
   // Two passes (count, fill) build the CSR lists; tets appear in ascending order in every cell.
   geo->cell_begin.assign(ncells + 1, 0);
+  geo->tet_cell.resize(nt);
   for (int pass = 0; pass < 2; ++pass) {
     std::vector<int> fill;
     if (pass == 1) {
@@ -251,6 +269,7 @@ MaterialGraph::MaterialGraph(TetMesh mesh) {
     for (std::size_t t = 0; t < nt; ++t) {
       std::array<int, 3> lo{}, hi{};
       cell_range(geo->tet_box[t], lo, hi);
+      if (pass == 0) geo->tet_cell[t] = lo;
       for (int k = lo[2]; k <= hi[2]; ++k)
         for (int j = lo[1]; j <= hi[1]; ++j)
           for (int i = lo[0]; i <= hi[0]; ++i) {
@@ -325,11 +344,11 @@ void MaterialGraph::cell_range(const Box3& box, std::array<int, 3>& lo, std::arr
   }
 }
 
-std::vector<int> MaterialGraph::tets_near(const Box3& box) const {
+template <class Visit>
+bool MaterialGraph::visit_tets_near(const Box3& box, Visit&& visit) const {
   const Geometry& g = *m_geo;
-  std::vector<int> out;
-  if (m_num_alive == 0) return out;
-  if ((box.max.array() < m_bounds.min.array()).any() || (box.min.array() > m_bounds.max.array()).any()) return out;
+  if (m_num_alive == 0) return false;
+  if ((box.max.array() < m_bounds.min.array()).any() || (box.min.array() > m_bounds.max.array()).any()) return false;
   std::array<int, 3> lo{}, hi{};
   cell_range(box, lo, hi);
   const std::size_t cells = std::size_t(hi[0] - lo[0] + 1) * std::size_t(hi[1] - lo[1] + 1) *
@@ -339,22 +358,36 @@ std::vector<int> MaterialGraph::tets_near(const Box3& box) const {
     const Box3& b = g.tet_box[std::size_t(t)];
     return (b.max.array() >= box.min.array()).all() && (b.min.array() <= box.max.array()).all();
   };
-  // A box covering most of the grid: test every tet directly instead of gathering duplicates.
+  // A box covering most of the grid: test every tet directly instead of walking the cells.
   if (cells * 4 > g.cell_begin.size()) {
     for (int t = 0; t < num_tets_total(); ++t)
-      if (overlaps(t)) out.push_back(t);
-    return out;
+      if (overlaps(t) && visit(t)) return true;
+    return false;
   }
+  // A tet filed in several cells of the range is visited once: from the first cell (lowest along each axis) that
+  // its own range and the query's range share.
   for (int k = lo[2]; k <= hi[2]; ++k)
     for (int j = lo[1]; j <= hi[1]; ++j)
       for (int i = lo[0]; i <= hi[0]; ++i) {
         const std::size_t c =
             (std::size_t(k) * std::size_t(g.dims[1]) + std::size_t(j)) * std::size_t(g.dims[0]) + std::size_t(i);
-        for (int n = g.cell_begin[c]; n < g.cell_begin[c + 1]; ++n)
-          if (overlaps(g.cell_tets[std::size_t(n)])) out.push_back(g.cell_tets[std::size_t(n)]);
+        for (int n = g.cell_begin[c]; n < g.cell_begin[c + 1]; ++n) {
+          const int t = g.cell_tets[std::size_t(n)];
+          const std::array<int, 3>& tlo = g.tet_cell[std::size_t(t)];
+          if (std::max(tlo[0], lo[0]) != i || std::max(tlo[1], lo[1]) != j || std::max(tlo[2], lo[2]) != k) continue;
+          if (overlaps(t) && visit(t)) return true;
+        }
       }
+  return false;
+}
+
+std::vector<int> MaterialGraph::tets_near(const Box3& box) const {
+  std::vector<int> out;
+  visit_tets_near(box, [&out](int t) {
+    out.push_back(t);
+    return false;
+  });
   std::sort(out.begin(), out.end());
-  out.erase(std::unique(out.begin(), out.end()), out.end());
   return out;
 }
 
@@ -377,9 +410,8 @@ bool MaterialGraph::face_connected(const Box3& face, int axis) const {
   // Positive area relative to the face, so that rounding in a crossing point cannot connect a mere edge contact.
   const int u = (axis + 1) % 3, w = (axis + 2) % 3;
   const double threshold = 1e-12 * (face.max[u] - face.min[u]) * (face.max[w] - face.min[w]);
-  for (int t : tets_near(face))
-    if (tet_face_section_area(tet(t), face, axis) > threshold) return true;
-  return false;
+  // Any tet will do, so the tets are tried as the grid yields them, stopping at the first.
+  return visit_tets_near(face, [&](int t) { return tet_face_section_area(tet(t), face, axis) > threshold; });
 }
 
 }  // namespace octocut::sim

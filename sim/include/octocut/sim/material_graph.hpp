@@ -79,6 +79,10 @@ class MaterialGraph final : public MaterialSource {
  private:
   // Grid cells overlapped by a box, clamped to the grid: [lo, hi] per axis.
   void cell_range(const Box3& box, std::array<int, 3>& lo, std::array<int, 3>& hi) const;
+  // Calls visit(t) once for each live tet whose bounding box overlaps `box` (closed boxes), in grid order, until
+  // visit returns true; returns whether it did.
+  template <class Visit>
+  bool visit_tets_near(const Box3& box, Visit&& visit) const;
   // Recomputes the live count, volume and bounds from the alive mask.
   void update_live_totals();
 

@@ -18,6 +18,9 @@
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Polygon_mesh_processing/corefinement.h>
 #include <CGAL/Polygon_mesh_processing/self_intersections.h>
+#include <CGAL/AABB_face_graph_triangle_primitive.h>
+#include <CGAL/AABB_traits.h>
+#include <CGAL/AABB_tree.h>
 #include <CGAL/Side_of_triangle_mesh.h>
 #include <CGAL/Surface_mesh.h>
 #include <CGAL/box_intersection_d.h>
@@ -31,6 +34,7 @@
 #include <cstdint>
 #include <exception>
 #include <numeric>
+#include <optional>
 #include <string>
 #include <unordered_map>
 #include <utility>
@@ -107,16 +111,20 @@ void check_input(const sim::TriMesh& mesh, const char* name) {
   }
 }
 
-// Records, for every piece of a split face of P, the face of S it lies in.
+// Records, for every piece of a split face, the input face it lies in (a face of S for P, of the blade for B).
 struct OriginVisitor : PMP::Corefinement::Default_visitor<Mesh> {
   const Mesh* patch = nullptr;
-  Mesh::Property_map<FI, int32_t>* origin = nullptr;
+  Mesh::Property_map<FI, int32_t>* origin = nullptr;    // on the patch
+  Mesh::Property_map<FI, int32_t>* b_origin = nullptr;  // on the blade
   int32_t current = -1;
+  int32_t b_current = -1;
   void before_subface_creations(FI f, Mesh& tm) {
     if (&tm == patch) current = (*origin)[f];
+    else b_current = (*b_origin)[f];
   }
   void after_subface_created(FI f, Mesh& tm) {
     if (&tm == patch) (*origin)[f] = current;
+    else (*b_origin)[f] = b_current;
   }
 };
 
@@ -171,16 +179,6 @@ Point centroid(const std::array<Point, 3>& p) { return CGAL::centroid(p[0], p[1]
 
 Vec3 face_normal(const std::array<Point, 3>& p) {
   return (to_vec(p[1]) - to_vec(p[0])).cross(to_vec(p[2]) - to_vec(p[0]));
-}
-
-// The first face of `mesh` whose (closed) triangle contains q exactly, or null_face.
-FI face_containing(const Mesh& mesh, const Point& q) {
-  for (const FI f : mesh.faces()) {
-    const auto p = face_points(mesh, f);
-    if (!CGAL::coplanar(p[0], p[1], p[2], q)) continue;
-    if (CGAL::do_intersect(Kernel::Triangle_3(p[0], p[1], p[2]), q)) return f;
-  }
-  return Mesh::null_face();
 }
 
 enum class Side { inside, outside, boundary, degenerate };
@@ -473,19 +471,6 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
   }
   result.patch_triangles = static_cast<int>(patch.size());
 
-  // No face near the blade: it is either inside S (a cavity) or misses it.
-  if (patch.empty()) {
-    const Side side = point_in_surface(surface, to_point(blade.vertices[static_cast<std::size_t>(blade.triangles[0][0])]));
-    if (side != Side::inside) {
-      result.status = SurfaceCutStatus::no_op;
-      result.reason = "blade misses the surface";
-      result.mesh = surface;
-      result.triangle_origin.resize(static_cast<std::size_t>(nf));
-      std::iota(result.triangle_origin.begin(), result.triangle_origin.end(), 0);
-      return;
-    }
-  }
-
   // Copy P into a Surface_mesh; a vertex whose patch faces form several fans gets one copy per fan.
   Mesh pmesh;
   std::vector<int32_t> p_old;  // old vertex index of each initial P vertex (|V_P|)
@@ -561,6 +546,19 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
     origin[f] = patch[i];
   }
   const auto p_initial_vertices = static_cast<std::size_t>(pmesh.number_of_vertices());
+  auto b_origin = bmesh.add_property_map<FI, int32_t>("f:origin", -1).first;
+  for (const FI f : bmesh.faces()) b_origin[f] = static_cast<int32_t>(f.idx());
+  // Normals of the input triangles (exact inputs; the pieces' own normals suffer from rounded vertices).
+  const auto s_normal = [&](int32_t f) {
+    const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
+    return (surface.vertices[static_cast<std::size_t>(t[1])] - surface.vertices[static_cast<std::size_t>(t[0])])
+        .cross(surface.vertices[static_cast<std::size_t>(t[2])] - surface.vertices[static_cast<std::size_t>(t[0])]);
+  };
+  const auto b_normal = [&](int32_t f) {
+    const Tri& t = blade.triangles[static_cast<std::size_t>(f)];
+    return (blade.vertices[static_cast<std::size_t>(t[1])] - blade.vertices[static_cast<std::size_t>(t[0])])
+        .cross(blade.vertices[static_cast<std::size_t>(t[2])] - blade.vertices[static_cast<std::size_t>(t[0])]);
+  };
 
   // Corefine P with the blade; the intersection edges become constrained in both.
   auto p_constrained = pmesh.add_property_map<EI, bool>("e:constrained", false).first;
@@ -569,6 +567,7 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
     OriginVisitor visitor;
     visitor.patch = &pmesh;
     visitor.origin = &origin;
+    visitor.b_origin = &b_origin;
     PMP::corefine(pmesh, bmesh,
                   PMP::parameters::edge_is_constrained_map(p_constrained).visitor(visitor).throw_on_self_intersection(true),
                   PMP::parameters::edge_is_constrained_map(b_constrained));
@@ -580,26 +579,47 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
   const int p_regions = label_regions(pmesh, p_constrained, p_region);
   const int b_regions = label_regions(bmesh, b_constrained, b_region);
 
-  // Classify P's regions against the blade: keep those outside; a region on the blade is coplanar with a blade face
-  // and goes when the normals agree.
+  // Faces of each region.
+  const auto faces_by_region = [](const Mesh& mesh, const Mesh::Property_map<FI, int>& region, int count) {
+    std::vector<std::vector<FI>> out(static_cast<std::size_t>(count));
+    for (const FI f : mesh.faces()) out[static_cast<std::size_t>(region[f])].push_back(f);
+    return out;
+  };
+  // Distances below eps are rounding of the constructed intersection points (coordinates are rounded to doubles,
+  // about 1e-16 relative); such a region is taken as coplanar with the other mesh.
+  const double eps2 = std::pow(1e-9 * (gmax - gmin).norm(), 2);  // m^2
+
+  // Classify P's regions against the blade: keep those outside; a region on the blade (every face centroid within
+  // eps) is coplanar with a blade face and goes when the normals agree. The face farthest from the blade decides.
   std::vector<char> p_keep(static_cast<std::size_t>(p_regions), 1);
-  {
-    const CGAL::Side_of_triangle_mesh<Mesh, Kernel> inside_blade(bmesh);
+  if (p_regions > 0) {
+    using Side_of = CGAL::Side_of_triangle_mesh<Mesh, Kernel>;
+    const Side_of::AABB_tree b_tree(bmesh.faces().begin(), bmesh.faces().end(), bmesh);
+    const Side_of inside_blade(b_tree);
+    const auto p_faces = faces_by_region(pmesh, p_region, p_regions);
     const std::vector<FI> rep = region_representatives(pmesh, p_region, p_regions);
     for (int r = 0; r < p_regions; ++r) {
-      const auto pts = face_points(pmesh, rep[static_cast<std::size_t>(r)]);
-      const Point q = centroid(pts);
-      const CGAL::Bounded_side side = inside_blade(q);
-      if (side == CGAL::ON_BOUNDED_SIDE) {
-        p_keep[static_cast<std::size_t>(r)] = 0;
-      } else if (side == CGAL::ON_BOUNDARY) {
-        const FI g = face_containing(bmesh, q);
-        if (g == Mesh::null_face()) {
-          throw CutFailure{"a piece of surface triangle " + std::to_string(origin[rep[static_cast<std::size_t>(r)]]) +
-                           " lies on the blade but on none of its faces (rounding)"};
+      const auto& faces = p_faces[static_cast<std::size_t>(r)];
+      Point q = centroid(face_points(pmesh, rep[static_cast<std::size_t>(r)]));
+      double d2 = b_tree.squared_distance(q);
+      FI at = rep[static_cast<std::size_t>(r)];
+      for (std::size_t i = 0; d2 <= eps2 && i < faces.size(); ++i) {
+        const Point c = centroid(face_points(pmesh, faces[i]));
+        const double e2 = b_tree.squared_distance(c);
+        if (e2 > d2) {
+          d2 = e2;
+          q = c;
+          at = faces[i];
         }
-        p_keep[static_cast<std::size_t>(r)] = face_normal(pts).dot(face_normal(face_points(bmesh, g))) > 0.0 ? 0 : 1;
       }
+      if (d2 > eps2) {
+        const CGAL::Bounded_side side = inside_blade(q);
+        p_keep[static_cast<std::size_t>(r)] = side == CGAL::ON_BOUNDED_SIDE ? 0 : 1;
+        continue;
+      }
+      const auto [closest, primitive] = b_tree.closest_point_and_primitive(q);
+      const FI g = primitive;
+      p_keep[static_cast<std::size_t>(r)] = s_normal(origin[at]).dot(b_normal(b_origin[g])) > 0.0 ? 0 : 1;
     }
   }
   const auto p_kept = [&](FI f) { return f != Mesh::null_face() && p_keep[static_cast<std::size_t>(p_region[f])] != 0; };
@@ -639,7 +659,11 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
   }
   std::vector<char> b_keep(static_cast<std::size_t>(b_regions), 0);
   {
+    const auto b_faces = faces_by_region(bmesh, b_region, b_regions);
     const std::vector<FI> rep = region_representatives(bmesh, b_region, b_regions);
+    using Primitive = CGAL::AABB_face_graph_triangle_primitive<Mesh>;
+    using Tree = CGAL::AABB_tree<CGAL::AABB_traits<Kernel, Primitive>>;
+    std::optional<Tree> p_tree;
     for (int r = 0; r < b_regions; ++r) {
       const int v = b_vote[static_cast<std::size_t>(r)];
       if (v == 2) throw CutFailure{"blade region " + std::to_string(r) + " is both inside and outside the surface"};
@@ -647,11 +671,38 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
         b_keep[static_cast<std::size_t>(r)] = v > 0 ? 1 : 0;
         continue;
       }
-      // No vote: coplanar with P (discard), else inside or outside S by an exact ray test.
-      const Point q = centroid(face_points(bmesh, rep[static_cast<std::size_t>(r)]));
-      if (!patch.empty() && face_containing(pmesh, q) != Mesh::null_face()) continue;
-      const Side side = point_in_surface(surface, q);
-      if (side == Side::degenerate || side == Side::boundary) {
+      // No vote: coplanar with P (every face centroid within eps of it) is discarded.
+      const auto& faces = b_faces[static_cast<std::size_t>(r)];
+      if (!patch.empty()) {
+        if (!p_tree) p_tree.emplace(pmesh.faces().begin(), pmesh.faces().end(), pmesh);
+        double d2 = p_tree->squared_distance(centroid(face_points(bmesh, rep[static_cast<std::size_t>(r)])));
+        for (std::size_t i = 0; d2 <= eps2 && i < faces.size(); ++i) {
+          d2 = std::max(d2, p_tree->squared_distance(centroid(face_points(bmesh, faces[i]))));
+        }
+        if (d2 <= eps2) continue;
+      }
+      // Otherwise inside or outside S by an exact ray test from a point inside one of its faces (several points are
+      // tried when a ray grazes an edge or a vertex of S).
+      static constexpr std::array<std::array<double, 3>, 3> kWeights{
+          {{1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0}, {0.2913, 0.3527, 0.3560}, {0.6181, 0.2011, 0.1808}}};
+      Side side = Side::degenerate;
+      std::vector<FI> tries{rep[static_cast<std::size_t>(r)]};
+      for (std::size_t i = 0; i < faces.size() && tries.size() < 8; i += std::max<std::size_t>(1, faces.size() / 7)) {
+        tries.push_back(faces[i]);
+      }
+      for (const FI f : tries) {
+        for (const auto& w : kWeights) {
+          const auto p = face_points(bmesh, f);
+          const Point q(w[0] * p[0].x() + w[1] * p[1].x() + w[2] * p[2].x(),
+                        w[0] * p[0].y() + w[1] * p[1].y() + w[2] * p[2].y(),
+                        w[0] * p[0].z() + w[1] * p[1].z() + w[2] * p[2].z());
+          if (!patch.empty() && p_tree->squared_distance(q) <= eps2) continue;
+          side = point_in_surface(surface, q);
+          if (side == Side::inside || side == Side::outside) break;
+        }
+        if (side == Side::inside || side == Side::outside) break;
+      }
+      if (side != Side::inside && side != Side::outside) {
         throw CutFailure{"cannot decide whether blade region " + std::to_string(r) + " is inside the surface"};
       }
       b_keep[static_cast<std::size_t>(r)] = side == Side::inside ? 1 : 0;

@@ -356,7 +356,7 @@ TEST(SurfaceCut, SixPunchesIntoTheMeniscus) {
   const double v0 = sim::signed_volume(s);
   double removed = 0.0;
   for (int i = 0; i < 6; ++i) {
-    const SurfaceCutResult r = cut_surface(s, rim_punch(150.0 + 45.0 * i, 0.0003 * i));
+    const SurfaceCutResult r = cut_surface(s, rim_punch(150.0 + 45.0 * i, 0.0001 * i));
     expect_valid_cut(s, r, "punch " + std::to_string(i));
     removed += r.removed_volume;
     s = r.mesh;

@@ -177,10 +177,6 @@ std::vector<FI> region_representatives(const Mesh& mesh, const Mesh::Property_ma
 
 Point centroid(const std::array<Point, 3>& p) { return CGAL::centroid(p[0], p[1], p[2]); }
 
-Vec3 face_normal(const std::array<Point, 3>& p) {
-  return (to_vec(p[1]) - to_vec(p[0])).cross(to_vec(p[2]) - to_vec(p[0]));
-}
-
 enum class Side { inside, outside, boundary, degenerate };
 
 // Exact parity of the crossings of S by the ray from q along +-axis `axis` (dir = +1 or -1). Every decision is an

@@ -381,24 +381,23 @@ void verify_self_intersections(const sim::TriMesh& out, const std::vector<int32_
   using Box = CGAL::Box_intersection_d::Box_with_info_d<double, 3, int32_t>;
   std::vector<Box> boxes;
   boxes.reserve(changed.size() + neighbours.size());
-  const auto add = [&](int32_t f) {
+  // A box's info is 2 f + 1 for a changed triangle f, 2 f for a neighbour.
+  const auto add = [&](int32_t f, int32_t changed_bit) {
     const Tri& t = out.triangles[static_cast<std::size_t>(f)];
     const Vec3& a = out.vertices[static_cast<std::size_t>(t[0])];
     const Vec3& b = out.vertices[static_cast<std::size_t>(t[1])];
     const Vec3& c = out.vertices[static_cast<std::size_t>(t[2])];
     const Vec3 lo = a.cwiseMin(b).cwiseMin(c), hi = a.cwiseMax(b).cwiseMax(c);
     double l[3] = {lo.x(), lo.y(), lo.z()}, h[3] = {hi.x(), hi.y(), hi.z()};
-    boxes.emplace_back(Box(l, h, f));
+    boxes.emplace_back(Box(l, h, 2 * f + changed_bit));
   };
-  for (const int32_t f : changed) add(f);
-  for (const int32_t f : neighbours) add(f);
-  std::unordered_map<int32_t, char> changed_set;
-  for (const int32_t f : changed) changed_set[f] = 1;
+  for (const int32_t f : changed) add(f, 1);
+  for (const int32_t f : neighbours) add(f, 0);
   bool found = false;
   std::array<int32_t, 2> best{};
   CGAL::box_self_intersection_d(boxes.begin(), boxes.end(), [&](const Box& x, const Box& y) {
-    const int32_t f = x.info(), g = y.info();
-    if (!changed_set.count(f) && !changed_set.count(g)) return;
+    if ((x.info() & 1) == 0 && (y.info() & 1) == 0) return;
+    const int32_t f = x.info() / 2, g = y.info() / 2;
     if (triangles_intersect(out, out.triangles[static_cast<std::size_t>(f)],
                             out.triangles[static_cast<std::size_t>(g)])) {
       const std::array<int32_t, 2> pair{std::min(f, g), std::max(f, g)};
@@ -415,7 +414,6 @@ void verify_self_intersections(const sim::TriMesh& out, const std::vector<int32_
 // The whole cut; throws CutFailure.
 void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCutOptions& options,
          SurfaceCutResult& result) {
-  check_input(surface, "surface");
   check_input(blade, "blade");
   if (blade.triangles.empty()) throw CutFailure{"blade has no triangles"};
   const auto nv = static_cast<int32_t>(surface.vertices.size());
@@ -436,7 +434,9 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
     }
   }
   if (!CGAL::is_closed(bmesh)) throw CutFailure{"blade is not closed"};
-  if (PMP::does_self_intersect(bmesh)) throw CutFailure{"blade intersects itself"};
+  if (options.check_blade_self_intersection && PMP::does_self_intersect(bmesh)) {
+    throw CutFailure{"blade intersects itself"};
+  }
   if (sim::signed_volume(blade) <= 0.0) throw CutFailure{"blade is not outward oriented (volume <= 0)"};
 
   // G: the blade's bounding box, grown.
@@ -452,18 +452,47 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
   gmax.array() += margin;
   const Vec3 centre = 0.5 * (gmin + gmax);  // origin of the local volume sums, m
 
-  // P: the faces of S whose bounding box meets G (one linear pass).
-  std::vector<int32_t> patch;  // face indices of S, ascending
-  for (int32_t f = 0; f < nf; ++f) {
-    const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
+  // Finite coordinates: one reduction (NaN and infinity propagate); the slow check names the offender.
+  {
+    double sum = 0.0;
+    for (const Vec3& p : surface.vertices) sum += p.x() + p.y() + p.z();
+    if (!std::isfinite(sum)) check_input(surface, "surface");
+  }
+
+  // P: the faces of S whose bounding box meets G, in one linear pass that also checks the indices. Faces within
+  // `reach` of G (Chebyshev distance of the boxes) are remembered as candidates for P's unchanged neighbours; reach
+  // is four times the largest box extent among the first faces of S (a cheap size estimate; verification falls back
+  // to a full pass when P's faces are larger).
+  const auto face_box = [&](const Tri& t, Vec3& lo, Vec3& hi) {
     const Vec3& a = surface.vertices[static_cast<std::size_t>(t[0])];
     const Vec3& b = surface.vertices[static_cast<std::size_t>(t[1])];
     const Vec3& c = surface.vertices[static_cast<std::size_t>(t[2])];
-    bool meets = true;
-    for (int k = 0; k < 3 && meets; ++k) {
-      meets = std::max({a[k], b[k], c[k]}) >= gmin[k] && std::min({a[k], b[k], c[k]}) <= gmax[k];
-    }
-    if (meets) patch.push_back(f);
+    lo = a.cwiseMin(b).cwiseMin(c);
+    hi = a.cwiseMax(b).cwiseMax(c);
+  };
+  const auto index_ok = [&](const Tri& t) {
+    return static_cast<uint32_t>(t[0]) < static_cast<uint32_t>(nv) &&
+           static_cast<uint32_t>(t[1]) < static_cast<uint32_t>(nv) &&
+           static_cast<uint32_t>(t[2]) < static_cast<uint32_t>(nv);
+  };
+  double reach = 0.0;  // m
+  for (int32_t f = 0; f < std::min<int32_t>(nf, 256); ++f) {
+    const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
+    if (!index_ok(t)) check_input(surface, "surface");
+    Vec3 lo, hi;
+    face_box(t, lo, hi);
+    reach = std::max(reach, 4.0 * (hi - lo).maxCoeff());
+  }
+  std::vector<int32_t> patch;       // face indices of S, ascending
+  std::vector<int32_t> near_faces;  // faces of S outside P within `reach` of G, ascending
+  for (int32_t f = 0; f < nf; ++f) {
+    const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
+    if (!index_ok(t)) check_input(surface, "surface");
+    Vec3 lo, hi;
+    face_box(t, lo, hi);
+    const double gap = (lo - gmax).cwiseMax(gmin - hi).maxCoeff();  // Chebyshev distance of the boxes, m
+    if (gap <= 0.0) patch.push_back(f);
+    else if (gap <= reach) near_faces.push_back(f);
   }
   result.patch_triangles = static_cast<int>(patch.size());
 
@@ -788,26 +817,27 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
   }
 
   // Renumber: kept old vertices in order, then the new P vertices, then the new blade vertices.
+  // old_to_new (|V|): the new index of each old vertex, -1 when removed; filled range by range between removed ones.
   std::vector<int32_t> old_to_new(static_cast<std::size_t>(nv));
-  {
-    std::size_t r = 0;
-    int32_t next = 0;
-    for (int32_t v = 0; v < nv; ++v) {
-      if (r < result.removed_vertices.size() && result.removed_vertices[r] == v) {
-        old_to_new[static_cast<std::size_t>(v)] = -1;
-        ++r;
-      } else {
-        old_to_new[static_cast<std::size_t>(v)] = next++;
-      }
-    }
-  }
   const auto kept_count = static_cast<int32_t>(nv - static_cast<int32_t>(result.removed_vertices.size()));
-  std::vector<int32_t> new_to_out(used_new.size(), -1);
   sim::TriMesh& out = result.mesh;
-  out.vertices.reserve(static_cast<std::size_t>(kept_count) + used_new.size());
-  for (int32_t v = 0; v < nv; ++v) {
-    if (old_to_new[static_cast<std::size_t>(v)] >= 0) out.vertices.push_back(surface.vertices[static_cast<std::size_t>(v)]);
+  out.vertices.resize(static_cast<std::size_t>(kept_count));
+  {
+    int32_t from = 0, shift = 0;
+    const auto copy_range = [&](int32_t to) {  // kept vertices [from, to)
+      std::iota(old_to_new.begin() + from, old_to_new.begin() + to, from - shift);
+      std::copy(surface.vertices.begin() + from, surface.vertices.begin() + to, out.vertices.begin() + (from - shift));
+    };
+    for (const int v : result.removed_vertices) {
+      copy_range(v);
+      old_to_new[static_cast<std::size_t>(v)] = -1;
+      from = v + 1;
+      ++shift;
+    }
+    copy_range(nv);
   }
+  std::vector<int32_t> new_to_out(used_new.size(), -1);
+  out.vertices.reserve(static_cast<std::size_t>(kept_count) + used_new.size());
   for (std::size_t k = 0; k < used_new.size(); ++k) {
     if (!used_new[k]) continue;
     new_to_out[k] = static_cast<int32_t>(out.vertices.size());
@@ -823,23 +853,34 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
 
   // Triangles: untouched faces in order, each patch face replaced by its kept pieces, then the blade faces.
   std::vector<int32_t> changed;  // output triangles built from the corefinement
-  std::vector<char> in_patch(static_cast<std::size_t>(nf), 0);
-  for (const int32_t f : patch) in_patch[static_cast<std::size_t>(f)] = 1;
   out.triangles.reserve(static_cast<std::size_t>(nf) + b_pieces.size() + p_pieces.size());
   result.triangle_origin.reserve(out.triangles.capacity());
   double volume_before = 0.0, volume_after = 0.0;  // m^3, over the changed faces, relative to `centre`
   {
-    std::size_t pi = 0;  // position in patch
-    for (int32_t f = 0; f < nf; ++f) {
-      const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
-      if (!in_patch[static_cast<std::size_t>(f)]) {
-        out.triangles.push_back({old_to_new[static_cast<std::size_t>(t[0])], old_to_new[static_cast<std::size_t>(t[1])],
-                                 old_to_new[static_cast<std::size_t>(t[2])]});
-        result.triangle_origin.push_back(f);
-        continue;
+    // The untouched faces [from, to), remapped (copied as they are when no vertex went).
+    const auto copy_faces = [&](int32_t from, int32_t to) {
+      const std::size_t at = out.triangles.size();
+      out.triangles.resize(at + static_cast<std::size_t>(to - from));
+      result.triangle_origin.resize(at + static_cast<std::size_t>(to - from));
+      std::iota(result.triangle_origin.begin() + static_cast<std::ptrdiff_t>(at), result.triangle_origin.end(), from);
+      if (result.removed_vertices.empty()) {
+        std::copy(surface.triangles.begin() + from, surface.triangles.begin() + to, out.triangles.begin() + static_cast<std::ptrdiff_t>(at));
+        return;
       }
+      Tri* dst = out.triangles.data() + at;
+      for (int32_t f = from; f < to; ++f, ++dst) {
+        const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
+        *dst = {old_to_new[static_cast<std::size_t>(t[0])], old_to_new[static_cast<std::size_t>(t[1])],
+                old_to_new[static_cast<std::size_t>(t[2])]};
+      }
+    };
+    int32_t next_face = 0;
+    for (std::size_t pi = 0; pi < patch.size(); ++pi) {
+      const int32_t f = patch[pi];
+      copy_faces(next_face, f);
+      next_face = f + 1;
+      const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
       const int begin = bucket_begin[pi], end = bucket_begin[pi + 1];
-      ++pi;
       // A face kept whole (one piece with its own nodes) is unchanged and adds nothing to the volume difference.
       const bool whole = end - begin == 1 && p_pieces[static_cast<std::size_t>(begin)].first[0] < nv &&
                          p_pieces[static_cast<std::size_t>(begin)].first[1] < nv &&
@@ -862,6 +903,7 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
         }
       }
     }
+    copy_faces(next_face, nf);
     for (const Tri& n : b_pieces) {
       const Tri o{out_index(n[0]), out_index(n[1]), out_index(n[2])};
       changed.push_back(static_cast<int32_t>(out.triangles.size()));
@@ -900,18 +942,36 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
     }
     verify_local(out, changed, boundary_edges, boundary_arcs);
 
-    // The unchanged neighbours: faces outside P with a vertex on P's boundary.
+    // The unchanged neighbours: faces outside P with a vertex on P's boundary. Such a face is within the largest
+    // box extent of P's faces of G; when that is beyond `reach`, every face is looked at.
     std::vector<int32_t> neighbours;
     if (!patch_arcs.empty()) {
-      std::vector<char> on_boundary(out.vertices.size(), 0);
-      for (const auto& [v, arcs] : boundary_arcs) on_boundary[static_cast<std::size_t>(v)] = 1;
-      for (std::size_t f = 0; f < out.triangles.size(); ++f) {
-        if (result.triangle_origin[f] < 0 || in_patch[static_cast<std::size_t>(result.triangle_origin[f])]) continue;
-        const Tri& t = out.triangles[f];
-        if (on_boundary[static_cast<std::size_t>(t[0])] || on_boundary[static_cast<std::size_t>(t[1])] ||
-            on_boundary[static_cast<std::size_t>(t[2])]) {
-          neighbours.push_back(static_cast<int32_t>(f));
+      double extent = 0.0;  // m
+      for (const int32_t f : patch) {
+        const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
+        const Vec3& a = surface.vertices[static_cast<std::size_t>(t[0])];
+        const Vec3& b = surface.vertices[static_cast<std::size_t>(t[1])];
+        const Vec3& c = surface.vertices[static_cast<std::size_t>(t[2])];
+        extent = std::max(extent, (a.cwiseMax(b).cwiseMax(c) - a.cwiseMin(b).cwiseMin(c)).maxCoeff());
+      }
+      std::vector<char> on_boundary(static_cast<std::size_t>(nv), 0);  // old vertices of P's boundary
+      for (const auto& [v, arcs] : patch_arcs) on_boundary[static_cast<std::size_t>(v)] = 1;
+      std::vector<int32_t> all;
+      if (extent >= reach) {
+        for (int32_t f = 0; f < nf; ++f) {
+          if (!std::binary_search(patch.begin(), patch.end(), f)) all.push_back(f);
         }
+      }
+      const std::vector<int32_t>& candidates = extent >= reach ? all : near_faces;
+      for (const int32_t f : candidates) {
+        const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
+        if (!on_boundary[static_cast<std::size_t>(t[0])] && !on_boundary[static_cast<std::size_t>(t[1])] &&
+            !on_boundary[static_cast<std::size_t>(t[2])]) {
+          continue;
+        }
+        // Its index in S': f, less the patch faces before it, plus their pieces.
+        const auto k = static_cast<std::size_t>(std::lower_bound(patch.begin(), patch.end(), f) - patch.begin());
+        neighbours.push_back(f - static_cast<int32_t>(k) + bucket_begin[k]);
       }
     }
     verify_self_intersections(out, changed, neighbours);

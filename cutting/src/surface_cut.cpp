@@ -33,6 +33,7 @@
 #include <cmath>
 #include <cstdint>
 #include <exception>
+#include <limits>
 #include <numeric>
 #include <optional>
 #include <string>
@@ -274,6 +275,32 @@ bool triangles_intersect(const sim::TriMesh& m, const Tri& s, const Tri& t) {
   return CGAL::do_intersect(ts, tt);
 }
 
+// The vertices (ascending) around which the faces `patch` of `surface` form more than one fan.
+std::vector<int32_t> pinched_vertices(const sim::TriMesh& surface, const std::vector<int32_t>& patch) {
+  std::vector<std::array<int32_t, 3>> corners;  // (vertex, next, previous)
+  corners.reserve(patch.size() * 3);
+  for (const int32_t f : patch) {
+    const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
+    for (int k = 0; k < 3; ++k) corners.push_back({t[k], t[(k + 1) % 3], t[(k + 2) % 3]});
+  }
+  std::sort(corners.begin(), corners.end());
+  std::vector<int32_t> pinched;
+  for (std::size_t i = 0; i < corners.size();) {
+    std::size_t j = i;
+    while (j < corners.size() && corners[j][0] == corners[i][0]) ++j;
+    // Each open fan starts at one corner whose next vertex is no corner's previous vertex.
+    int open = 0;
+    for (std::size_t a = i; a < j; ++a) {
+      bool matched = false;
+      for (std::size_t b = i; b < j && !matched; ++b) matched = b != a && corners[b][2] == corners[a][1];
+      if (!matched) ++open;
+    }
+    if (open > 1) pinched.push_back(corners[i][0]);
+    i = j;
+  }
+  return pinched;
+}
+
 // Local verification of S': `changed` are the triangles built from the corefined patch and the blade (indices into
 // out.triangles); `boundary_edges` are the directed edges (new indices) of the unchanged faces that border the
 // patch; `boundary_arcs[v]` is the number of fans the patch had around vertex v (new index), 0 when v was inside.
@@ -475,7 +502,7 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
            static_cast<uint32_t>(t[1]) < static_cast<uint32_t>(nv) &&
            static_cast<uint32_t>(t[2]) < static_cast<uint32_t>(nv);
   };
-  double reach = 0.0;  // m
+  double reach = 0.0;  // m (may become infinite below)
   for (int32_t f = 0; f < std::min<int32_t>(nf, 256); ++f) {
     const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
     if (!index_ok(t)) check_input(surface, "surface");
@@ -493,6 +520,36 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
     const double gap = (lo - gmax).cwiseMax(gmin - hi).maxCoeff();  // Chebyshev distance of the boxes, m
     if (gap <= 0.0) patch.push_back(f);
     else if (gap <= reach) near_faces.push_back(f);
+  }
+  // Close P around the vertices where its faces form more than one fan (a pinched vertex would need one copy per
+  // fan, and corefinement's self-intersection check would then see distinct vertices touching): add the faces
+  // around them, which lie outside G, until no vertex is pinched.
+  for (int round = 0; round < 32; ++round) {
+    const std::vector<int32_t> pinched = pinched_vertices(surface, patch);
+    if (pinched.empty()) break;
+    double extent = 0.0;  // largest box extent of P's faces, m
+    for (const int32_t f : patch) {
+      Vec3 lo, hi;
+      face_box(surface.triangles[static_cast<std::size_t>(f)], lo, hi);
+      extent = std::max(extent, (hi - lo).maxCoeff());
+    }
+    if (extent >= reach) {  // the faces around a pinched vertex may lie beyond `reach`: look at all of them
+      near_faces.clear();
+      for (int32_t f = 0; f < nf; ++f) {
+        if (!std::binary_search(patch.begin(), patch.end(), f)) near_faces.push_back(f);
+      }
+      reach = std::numeric_limits<double>::infinity();
+    }
+    std::vector<int32_t> rest;
+    for (const int32_t f : near_faces) {
+      const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
+      const bool touches = std::binary_search(pinched.begin(), pinched.end(), t[0]) ||
+                           std::binary_search(pinched.begin(), pinched.end(), t[1]) ||
+                           std::binary_search(pinched.begin(), pinched.end(), t[2]);
+      (touches ? patch : rest).push_back(f);
+    }
+    near_faces.swap(rest);
+    std::sort(patch.begin(), patch.end());
   }
   result.patch_triangles = static_cast<int>(patch.size());
 

@@ -132,6 +132,8 @@ void expect_bookkeeping(const TriMesh& s, const SurfaceCutResult& r, const std::
           << what << ": triangle " << f << " leaves the plane of its origin " << o;
     }
   }
+  const auto blade_faces = std::count(r.triangle_origin.begin(), r.triangle_origin.end(), -1);
+  EXPECT_EQ(blade_faces, r.blade_triangles_kept) << what;
   const double before = sim::signed_volume(s), after = sim::signed_volume(r.mesh);
   EXPECT_NEAR(r.removed_volume, before - after, 1e-10 * std::abs(before) + 1e-13 * scale * scale * scale) << what;
 }
@@ -289,6 +291,28 @@ TEST(SurfaceCut, SixPunchesAtDifferentSpots) {
     s = c.mesh;
   }
   EXPECT_NEAR(v0 - sim::signed_volume(s), expected, 1e-9 * e * e * e);
+}
+
+TEST(SurfaceCut, TiltedPunchesThroughASphereAreDeterministic) {
+  // Cylinders at oblique angles through a sphere mesh: no plane or vertex lines up with the axes.
+  TriMesh s = test::cube_sphere(12, 0.01);
+  for (int i = 0; i < 4; ++i) {
+    TriMesh b = cylinder(0.0, 0.0, 0.0015, -0.004, 0.02, 28);
+    const Eigen::Matrix3d rot =
+        (Eigen::AngleAxisd(0.3 + 0.7 * i, Vec3::UnitZ()) * Eigen::AngleAxisd(0.4 + 0.25 * i, Vec3::UnitX()))
+            .toRotationMatrix();
+    for (Vec3& p : b.vertices) p = rot * p + Vec3(0.001 * i, -0.0005 * i, 0.0002);
+    const SurfaceCutResult r = cut_surface(s, b);
+    expect_valid_cut(s, r, "tilted " + std::to_string(i));
+    const SurfaceCutResult again = cut_surface(s, b);
+    EXPECT_EQ(again.mesh.vertices, r.mesh.vertices);
+    EXPECT_EQ(again.mesh.triangles, r.mesh.triangles);
+    EXPECT_EQ(again.triangle_origin, r.triangle_origin);
+    SurfaceCutOptions unchecked;
+    unchecked.verify = false;
+    EXPECT_EQ(cut_surface(s, b, unchecked).mesh.triangles, r.mesh.triangles);
+    s = r.mesh;
+  }
 }
 
 TEST(SurfaceCut, BadInputFails) {

@@ -401,9 +401,11 @@ void verify_local(const sim::TriMesh& out, const std::vector<int32_t>& changed,
   }
 }
 
-// Self-intersections among the changed faces and between them and their unchanged neighbours (faces sharing a
-// vertex with them). Throws CutFailure naming the first pair found (smallest pair, for determinism).
+// Self-intersections among the changed faces and between them and their unchanged neighbours: the faces of S kept
+// whole in the patch (`whole`, per entry of `changed`) and the faces outside it that share a vertex with it. Pairs of
+// unchanged faces are skipped (S had no self-intersection). Throws CutFailure naming the smallest pair found.
 void verify_self_intersections(const sim::TriMesh& out, const std::vector<int32_t>& changed,
+                               const std::vector<char>& whole,
                                const std::vector<int32_t>& neighbours) {
   using Box = CGAL::Box_intersection_d::Box_with_info_d<double, 3, int32_t>;
   std::vector<Box> boxes;
@@ -418,7 +420,7 @@ void verify_self_intersections(const sim::TriMesh& out, const std::vector<int32_
     double l[3] = {lo.x(), lo.y(), lo.z()}, h[3] = {hi.x(), hi.y(), hi.z()};
     boxes.emplace_back(Box(l, h, 2 * f + changed_bit));
   };
-  for (const int32_t f : changed) add(f, 1);
+  for (std::size_t i = 0; i < changed.size(); ++i) add(changed[i], whole[i] ? 0 : 1);
   for (const int32_t f : neighbours) add(f, 0);
   bool found = false;
   std::array<int32_t, 2> best{};
@@ -909,7 +911,8 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
   };
 
   // Triangles: untouched faces in order, each patch face replaced by its kept pieces, then the blade faces.
-  std::vector<int32_t> changed;  // output triangles built from the corefinement
+  std::vector<int32_t> changed;      // output triangles built from the corefinement (P's pieces and the blade's)
+  std::vector<char> changed_whole;   // per entry of `changed`: 1 for a face of S kept whole (not really changed)
   out.triangles.reserve(static_cast<std::size_t>(nf) + b_pieces.size() + p_pieces.size());
   result.triangle_origin.reserve(out.triangles.capacity());
   double volume_before = 0.0, volume_after = 0.0;  // m^3, over the changed faces, relative to `centre`
@@ -951,6 +954,8 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
         const Tri& n = p_pieces[static_cast<std::size_t>(k)].first;
         const Tri o{out_index(n[0]), out_index(n[1]), out_index(n[2])};
         changed.push_back(static_cast<int32_t>(out.triangles.size()));
+      changed_whole.push_back(0);
+        changed_whole.push_back(whole ? 1 : 0);
         out.triangles.push_back(o);
         result.triangle_origin.push_back(f);
         if (!whole) {
@@ -964,6 +969,7 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
     for (const Tri& n : b_pieces) {
       const Tri o{out_index(n[0]), out_index(n[1]), out_index(n[2])};
       changed.push_back(static_cast<int32_t>(out.triangles.size()));
+      changed_whole.push_back(0);
       out.triangles.push_back(o);
       result.triangle_origin.push_back(-1);
       volume_after += tet_volume(centre, out.vertices[static_cast<std::size_t>(o[0])],
@@ -1031,7 +1037,7 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
         neighbours.push_back(f - static_cast<int32_t>(k) + bucket_begin[k]);
       }
     }
-    verify_self_intersections(out, changed, neighbours);
+    verify_self_intersections(out, changed, changed_whole, neighbours);
   }
   result.status = SurfaceCutStatus::ok;
 }

@@ -345,6 +345,14 @@ TEST(SurfaceCut, BadInputFails) {
   r = cut_surface(s, test::merged(b, box(Vec3(0.4, 0.4, 0.4), Vec3(0.8, 0.8, 0.8))));
   EXPECT_EQ(r.status, SurfaceCutStatus::failed);
   EXPECT_NE(r.reason.find("intersects itself"), std::string::npos) << r.reason;
+  EXPECT_TRUE(r.mesh.triangles.empty());
+
+  // A self-intersecting surface near the blade (the faces x = 1 and y = 0.5 cross inside and beside it): CGAL's
+  // exception or the verification turns it into a failure.
+  const TriMesh overlapping = test::merged(s, box(Vec3(0.5, 0.5, 0.5), Vec3(1.5, 1.5, 1.5)));
+  r = cut_surface(overlapping, box(Vec3(0.95, 0.45, 0.6), Vec3(1.05, 0.55, 0.7)));
+  EXPECT_EQ(r.status, SurfaceCutStatus::failed);
+  EXPECT_NE(r.reason.find("ntersect"), std::string::npos) << r.reason;  // "Self-intersection ..." or "... intersect"
 }
 
 // The 10k meniscus in metres (file in mm).

@@ -481,17 +481,10 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
   gmax.array() += margin;
   const Vec3 centre = 0.5 * (gmin + gmax);  // origin of the local volume sums, m
 
-  // Finite coordinates: one reduction (NaN and infinity propagate); the slow check names the offender.
-  {
-    double sum = 0.0;
-    for (const Vec3& p : surface.vertices) sum += p.x() + p.y() + p.z();
-    if (!std::isfinite(sum)) check_input(surface, "surface");
-  }
-
-  // P: the faces of S whose bounding box meets G, in one linear pass that also checks the indices. Faces within
-  // `reach` of G (Chebyshev distance of the boxes) are remembered as candidates for P's unchanged neighbours; reach
-  // is four times the largest box extent among the first faces of S (a cheap size estimate; verification falls back
-  // to a full pass when P's faces are larger).
+  // P: the faces of S whose bounding box meets G. Faces within `reach` of G (their boxes meet G grown by reach) are
+  // remembered as candidates for P's unchanged neighbours; reach is four times the largest box extent among the
+  // first faces of S (a cheap size estimate; the closure and the verification fall back to a full pass when P's
+  // faces are larger).
   const auto face_box = [&](const Tri& t, Vec3& lo, Vec3& hi) {
     const Vec3& a = surface.vertices[static_cast<std::size_t>(t[0])];
     const Vec3& b = surface.vertices[static_cast<std::size_t>(t[1])];
@@ -512,16 +505,33 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
     face_box(t, lo, hi);
     reach = std::max(reach, 4.0 * (hi - lo).maxCoeff());
   }
+  // One pass over the vertices computes Cohen-Sutherland outcodes against G (bits 0-5) and G grown by reach
+  // (bits 6-11), and checks that the coordinates are finite (NaN and infinity propagate into the sum). A face's box
+  // misses a box exactly when its three vertices share an outside bit, so the pass over the faces reads 3 codes
+  // instead of 9 coordinates.
+  std::vector<uint16_t> outcode(static_cast<std::size_t>(nv));  // (|V|)
+  {
+    const Vec3 rmin = gmin.array() - reach, rmax = gmax.array() + reach;  // m
+    double sum = 0.0;
+    for (int32_t v = 0; v < nv; ++v) {
+      const Vec3& p = surface.vertices[static_cast<std::size_t>(v)];
+      sum += p.x() + p.y() + p.z();
+      outcode[static_cast<std::size_t>(v)] = static_cast<uint16_t>(
+          (p.x() < gmin.x()) | (p.x() > gmax.x()) << 1 | (p.y() < gmin.y()) << 2 | (p.y() > gmax.y()) << 3 |
+          (p.z() < gmin.z()) << 4 | (p.z() > gmax.z()) << 5 | (p.x() < rmin.x()) << 6 | (p.x() > rmax.x()) << 7 |
+          (p.y() < rmin.y()) << 8 | (p.y() > rmax.y()) << 9 | (p.z() < rmin.z()) << 10 | (p.z() > rmax.z()) << 11);
+    }
+    if (!std::isfinite(sum)) check_input(surface, "surface");
+  }
   std::vector<int32_t> patch;       // face indices of S, ascending
   std::vector<int32_t> near_faces;  // faces of S outside P within `reach` of G, ascending
   for (int32_t f = 0; f < nf; ++f) {
     const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
     if (!index_ok(t)) check_input(surface, "surface");
-    Vec3 lo, hi;
-    face_box(t, lo, hi);
-    const double gap = (lo - gmax).cwiseMax(gmin - hi).maxCoeff();  // Chebyshev distance of the boxes, m
-    if (gap <= 0.0) patch.push_back(f);
-    else if (gap <= reach) near_faces.push_back(f);
+    const unsigned shared = outcode[static_cast<std::size_t>(t[0])] & outcode[static_cast<std::size_t>(t[1])] &
+                            outcode[static_cast<std::size_t>(t[2])];
+    if (shared == 0) patch.push_back(f);
+    else if ((shared & 0xfc0u) == 0) near_faces.push_back(f);
   }
   // Close P around the vertices where its faces form more than one fan (a pinched vertex would need one copy per
   // fan, and corefinement's self-intersection check would then see distinct vertices touching): add the faces

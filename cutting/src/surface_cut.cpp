@@ -1,18 +1,23 @@
 // The local surface boolean S \ B' (SPEC §4 stage 2). The only translation unit of the surface cut that sees CGAL.
 //
 // Algorithm:
-//  1. The patch P is the set of faces of S whose bounding box meets the grown bounding box G of the blade. A face
-//     outside P cannot touch the blade, so P's boundary edges (shared with faces outside P) stay untouched.
-//  2. P is copied into a Surface_mesh (a vertex whose faces in P form several fans gets one copy per fan) and
-//     corefined with the blade (PMP::corefine, exact predicates), marking the intersection edges as constrained and
-//     recording, through a visitor, which face of S each piece of P lies in.
+//  1. The patch P is the set of faces of S whose bounding box meets the grown bounding box G of the blade (found with
+//     vertex outcodes, one pass over the vertices and one over the faces). A face outside P cannot touch the blade,
+//     so P's boundary edges (shared with faces outside P) stay untouched. Where P's faces would form several fans
+//     around a vertex, the faces around it are added (they lie outside G), so every vertex of P is one CGAL vertex.
+//  2. P is copied into a Surface_mesh and corefined with the blade (PMP::corefine, exact predicates), marking the
+//     intersection edges as constrained and recording, through a visitor, which input face each piece lies in.
 //  3. P and the blade are cut into regions along the constrained edges. A P region is removed when a point inside it
-//     is inside the blade (Side_of_triangle_mesh); when the point is on the blade, the region is coplanar with a blade
-//     face and is removed when the normals agree. A blade region is kept (reversed) when, at a constrained edge where
-//     exactly one P face is kept, its halfedge runs in the same direction as that P face's; a region that gets no such
-//     vote is discarded when it is coplanar with P and otherwise kept when an exact ray-parity test puts it inside S.
+//     is inside the blade (Side_of_triangle_mesh), taking the face centroid farthest from the blade; when every
+//     centroid lies within 1e-9 x the blade's size of the blade (coplanar up to the rounding of constructed points),
+//     it is removed when the normals of the input faces agree and kept when they are opposite. A blade region is
+//     kept (reversed) when, at a constrained edge where exactly one P face is kept, its halfedge runs in the same
+//     direction as that P face's, and discarded when the opposite halfedge does; conflicting votes fail the cut. A
+//     region without votes is discarded when it lies on P (coplanar), and otherwise kept when an exact ray-parity
+//     test (axis rays, orientation predicates on S's input coordinates, retried on grazing rays) puts it inside S.
 //  4. The kept pieces are stitched back into S: P's original vertices keep their indices, new vertices are matched
-//     between the two meshes by identical coordinates. The result is verified locally.
+//     between the two meshes by identical coordinates. The result is verified locally (verify_local and
+//     verify_self_intersections), and V(S) - V(S') is summed over the changed faces only.
 #include "octocut/cutting/surface_cut.hpp"
 
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
@@ -565,7 +570,8 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
   }
   result.patch_triangles = static_cast<int>(patch.size());
 
-  // Copy P into a Surface_mesh; a vertex whose patch faces form several fans gets one copy per fan.
+  // Copy P into a Surface_mesh. After the closure above no vertex is pinched; were one left (32 rounds did not
+  // suffice), it would get one copy per fan.
   Mesh pmesh;
   std::vector<int32_t> p_old;  // old vertex index of each initial P vertex (|V_P|)
   std::vector<std::array<VI, 3>> p_face_vertices(patch.size());

@@ -315,6 +315,33 @@ TEST(SurfaceCut, TiltedPunchesThroughASphereAreDeterministic) {
   }
 }
 
+TEST(SurfaceCut, RandomBladeSequenceStaysWatertight) {
+  // 24 boxes and prisms at pseudo-random positions and angles (fixed seed), cut one after the other from a sphere.
+  TriMesh s = test::cube_sphere(10, 0.01);
+  uint64_t state = 12345;
+  const auto uniform = [&]() {  // in [0, 1)
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    return static_cast<double>(state >> 11) * 0x1.0p-53;
+  };
+  int ok = 0;
+  for (int i = 0; i < 24; ++i) {
+    TriMesh b = i % 2 == 0 ? cylinder(0.0, 0.0, 0.0005 + 0.0015 * uniform(), -0.003, 0.003 + 0.01 * uniform(), 12 + i)
+                           : box(Vec3(-0.002, -0.001, -0.0015), Vec3(0.002 * uniform() + 0.0005, 0.001, 0.004));
+    const Eigen::Matrix3d rot = (Eigen::AngleAxisd(6.283 * uniform(), Vec3::UnitZ()) *
+                                 Eigen::AngleAxisd(3.1416 * uniform(), Vec3::UnitX()))
+                                    .toRotationMatrix();
+    const Vec3 at = 0.012 * Vec3(uniform() - 0.5, uniform() - 0.5, uniform() - 0.5);
+    for (Vec3& p : b.vertices) p = rot * p + at;
+    const SurfaceCutResult r = cut_surface(s, b);
+    ASSERT_NE(r.status, SurfaceCutStatus::failed) << "blade " << i << ": " << r.reason;
+    if (r.status == SurfaceCutStatus::no_op) continue;
+    expect_valid_cut(s, r, "blade " + std::to_string(i));
+    s = r.mesh;
+    ++ok;
+  }
+  EXPECT_GE(ok, 12);
+}
+
 TEST(SurfaceCut, BadInputFails) {
   const TriMesh s = test::grid_cube(2, 1.0);
   TriMesh b = box(Vec3(0.2, 0.2, 0.2), Vec3(0.6, 0.6, 1.4));

@@ -15,7 +15,7 @@ struct SurfaceCutOptions {
                         ///< the blade's bounding-box diagonal)
   bool verify = true;   ///< check the result locally (closed, edge- and vertex-manifold, oriented, no degenerate
                         ///< triangle, no self-intersection among changed faces and their neighbours)
-  bool check_blade_self_intersection = true;  ///< reject a self-intersecting blade (about 0.5 ms for 128 triangles);
+  bool check_blade_self_intersection = true;  ///< reject a self-intersecting blade (0.3 ms for 128 triangles);
                                               ///< a caller that checked the blade once may turn this off
 };
 

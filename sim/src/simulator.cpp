@@ -1,6 +1,9 @@
 #include "octocut/sim/simulator.hpp"
 
 #include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <chrono>
 #include <chrono>
 #include <cmath>
 #include <functional>
@@ -79,41 +82,87 @@ struct FemSystem::Impl {
   void build_pattern(const std::vector<char>& constrained) {
     const int nd = model.num_dofs();
     const int ne = model.num_elements();
-    // Structural triplets: every free-free DOF pair coupled by an element, plus all diagonal blocks.
-    std::vector<Eigen::Triplet<double>> t;
-    for (int e = 0; e < ne; ++e)
+    // Block structure first (3 x 3 blocks of DOF pairs): the free DOFs each element couples, sorted and unique, and
+    // per block column the sorted block rows. Every diagonal block is present, constrained DOFs included.
+    std::vector<std::vector<int>> elem_dofs(static_cast<std::size_t>(ne));  // free DOFs of each element, ascending
+    std::vector<std::vector<int>> rows(static_cast<std::size_t>(nd)); // block rows of each block column, ascending
+    for (int d = 0; d < nd; ++d) rows[std::size_t(d)].push_back(d);
+    for (int e = 0; e < ne; ++e) {
+      auto& u = elem_dofs[std::size_t(e)];
       for (const GatherEntry& p : gather[std::size_t(e)])
-        for (const GatherEntry& q : gather[std::size_t(e)])
-          if (!constrained[std::size_t(p.dof)] && !constrained[std::size_t(q.dof)])
-            for (int r = 0; r < 3; ++r)
-              for (int c = 0; c < 3; ++c) t.emplace_back(3 * p.dof + r, 3 * q.dof + c, 0.0);
-    for (int d = 0; d < nd; ++d)
-      for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 3; ++c) t.emplace_back(3 * d + r, 3 * d + c, 0.0);
+        if (!constrained[std::size_t(p.dof)]) u.push_back(p.dof);
+      std::sort(u.begin(), u.end());
+      u.erase(std::unique(u.begin(), u.end()), u.end());
+      for (int k : u) rows[std::size_t(k)].insert(rows[std::size_t(k)].end(), u.begin(), u.end());
+    }
+    for (auto& r : rows) {
+      std::sort(r.begin(), r.end());
+      r.erase(std::unique(r.begin(), r.end()), r.end());
+    }
+    // Scalar CSC: column 3k + c holds rows 3j, 3j + 1, 3j + 2 for every block row j of block column k.
     SpMat A(3 * nd, 3 * nd);
-    A.setFromTriplets(t.begin(), t.end());
-    A.makeCompressed();
+    std::size_t nnz = 0;
+    for (const auto& r : rows) nnz += 9 * r.size();
+    A.resizeNonZeros(Eigen::Index(nnz));
+    int* outer = A.outerIndexPtr();
+    int* inner = A.innerIndexPtr();
+    int at = 0;
+    for (int k = 0; k < nd; ++k) {
+      for (int c = 0; c < 3; ++c) {
+        outer[3 * k + c] = at;
+        for (int j : rows[std::size_t(k)])
+          for (int r = 0; r < 3; ++r) inner[at++] = 3 * j + r;
+      }
+    }
+    outer[3 * nd] = at;
+    std::fill(A.valuePtr(), A.valuePtr() + nnz, 0.0);
     pattern = std::move(A);
 
-    // Offset of the first entry of block (j, k) in column 3k + c: rows 3j..3j+2 are contiguous there.
+    // Offsets: the entry of block (j, k) in column 3k + c is outer[3k + c] + 3 pos(j in rows[k]). Positions come
+    // from one merge walk per (element, free DOF) instead of a search per entry.
+    const int* out_ptr = pattern.outerIndexPtr();
+    pair_offsets.assign(std::size_t(ne), {});
+    std::vector<int> local;  // index in elem_dofs of each gather entry, -1 when constrained
+    std::vector<int> pos;    // pos[a * n + b]: position of elem_dofs[b] in rows[elem_dofs[a]]
+    for (int e = 0; e < ne; ++e) {
+      const auto& g = gather[std::size_t(e)];
+      const auto& u = elem_dofs[std::size_t(e)];
+      const std::size_t n = u.size();
+      pos.assign(n * n, 0);
+      for (std::size_t a2 = 0; a2 < n; ++a2) {
+        const auto& r = rows[std::size_t(u[a2])];
+        std::size_t i = 0;
+        for (std::size_t b2 = 0; b2 < n; ++b2) {
+          while (r[i] < u[b2]) ++i;
+          pos[a2 * n + b2] = int(i);
+        }
+      }
+      local.resize(g.size());
+      for (std::size_t i = 0; i < g.size(); ++i)
+        local[i] = constrained[std::size_t(g[i].dof)]
+                       ? -1
+                       : int(std::lower_bound(u.begin(), u.end(), g[i].dof) - u.begin());
+      auto& off = pair_offsets[std::size_t(e)];
+      off.clear();
+      off.reserve(3 * g.size() * g.size());
+      for (std::size_t pi = 0; pi < g.size(); ++pi)
+        for (std::size_t qi = 0; qi < g.size(); ++qi) {
+          if (local[pi] < 0 || local[qi] < 0) {
+            off.insert(off.end(), {-1, -1, -1});
+            continue;
+          }
+          const int k = g[qi].dof;
+          const int p3 = 3 * pos[std::size_t(local[qi]) * n + std::size_t(local[pi])];
+          for (int c = 0; c < 3; ++c) off.push_back(out_ptr[3 * k + c] + p3);
+        }
+    }
+    // Offset of a scalar entry (row, col) in the pattern.
     auto offset = [&](int row, int col) {
       const int* idx = pattern.innerIndexPtr();
       const int b = pattern.outerIndexPtr()[col], en = pattern.outerIndexPtr()[col + 1];
       const int* it = std::lower_bound(idx + b, idx + en, row);
       return int(it - idx);
     };
-    pair_offsets.assign(std::size_t(ne), {});
-    for (int e = 0; e < ne; ++e) {
-      const auto& g = gather[std::size_t(e)];
-      auto& off = pair_offsets[std::size_t(e)];
-      off.reserve(3 * g.size() * g.size());
-      for (const GatherEntry& p : g)
-        for (const GatherEntry& q : g)
-          for (int c = 0; c < 3; ++c)
-            off.push_back((constrained[std::size_t(p.dof)] || constrained[std::size_t(q.dof)])
-                              ? -1
-                              : offset(3 * p.dof, 3 * q.dof + c));
-    }
     diag_offsets.resize(3 * std::size_t(nd));
     for (int i = 0; i < 3 * nd; ++i) diag_offsets[std::size_t(i)] = offset(i, i);
     pattern_constrained = constrained;
@@ -224,6 +273,12 @@ void FemSystem::stiffness_product(const ElementFrame& frame, const VecX& v, VecX
   m_impl->gather_vectors(ke, out);
 }
 
+const SpMat& FemSystem::system_pattern(const std::vector<char>& constrained) {
+  Impl& im = *m_impl;
+  if (!im.have_pattern || im.pattern_constrained != constrained) im.build_pattern(constrained);
+  return im.pattern;
+}
+
 void FemSystem::assemble_system(double mc, double kc, const ElementFrame& frame,
                                 const std::vector<char>& constrained, const VecX& u, SpMat& A, VecX& coupling) {
   Impl& im = *m_impl;
@@ -321,19 +376,9 @@ void Simulator::set_model(ObjectModel model) {
 }
 
 void Simulator::refresh_solver() {
-  const int nd = m_model.num_dofs();
-  if (nd == 0) return;
-  ElementFrame frame;
-  m_fem->rotations(m_state.x, frame);
-  const VecX u = VecX::Zero(3 * nd);
-  VecX coupling;
-  const double dt = m_options.dt;
-  if (m_options.dynamic) {
-    m_fem->assemble_system(1.0 + dt * m_model.params().rayleigh_mass, dt * m_model.params().rayleigh_stiffness + dt * dt,
-                           frame, m_constrained, u, m_A, coupling);
-  } else {
-    m_fem->assemble_system(0.0, 1.0, frame, m_constrained, u, m_A, coupling);
-  }
+  if (m_model.num_dofs() == 0) return;
+  // The pattern is all the symbolic analysis needs; the values come with the next step's assembly.
+  m_A = m_fem->system_pattern(m_constrained);
   m_solver->analyze_pattern(m_A);
   m_pattern_analyzed = true;
 }

@@ -72,6 +72,9 @@ class FemSystem {
   /// A_fc u_c of the unconstrained rows with the prescribed values u (only entries of constrained DOFs are read).
   void assemble_system(double m, double k, const ElementFrame& frame, const std::vector<char>& constrained,
                        const VecX& u, SpMat& A, VecX& coupling);
+  /// The fixed sparsity pattern of the system matrix for the constrained flags (num_dofs), values zero; built once
+  /// per flags and kept.
+  const SpMat& system_pattern(const std::vector<char>& constrained);
   /// Like elastic_force, and also the product K v of the corotated stiffness with v (both 3 num_dofs).
   void force_and_product(const std::vector<Vec3>& x, const ElementFrame& frame, const VecX& v, VecX& f,
                          VecX& kv) const;

@@ -397,10 +397,8 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
 
     t0 = Clock::now();
     simulator.set_model(std::move(next));
-    const double t_set = ms_since(t0);
     try {
       simulator.refresh_solver();
-      if (std::getenv("OCTOCUT_CUT_DEBUG")) std::fprintf(stderr, "set_model %.2f refresh %.2f\n", t_set, ms_since(t0) - t_set);
     } catch (const std::exception&) {
       // The next step analyses the pattern again and its guards handle a solver failure.
     }

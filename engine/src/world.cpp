@@ -488,6 +488,9 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
         report.cuts.push_back(c);
         if (o.status == "skipped")
           report.warnings.push_back("cut at t = " + format_seconds(ev.t) + " by " + c.tool + " skipped: " + o.reason);
+        if (o.perturbed > 0)
+          report.warnings.push_back("cut at t = " + format_seconds(ev.t) + " by " + c.tool +
+                                    ": a degenerate blade position was moved by 1e-9 of the blade's size");
         if (o.status == "ok") update_surface();
       }
     };

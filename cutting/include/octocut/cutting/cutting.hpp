@@ -67,6 +67,7 @@ struct CutOutcome {
   int fragments_removed = 0;          ///< loose pieces removed from the simulation
   double fragment_volume = 0.0;       ///< their material volume, m^3
   double max_blend = 0.0;             ///< largest shape-matching blend towards the rotation (0: none)
+  int perturbed = 0;                  ///< blades moved by 1e-9 (or 1e-7) of their size to leave a degenerate case
   CutStageMs ms;
 };
 

@@ -249,7 +249,8 @@ Entry make_scene_schema() {
        std::move(tool_keyframes),
        object_array("cuts",
                     {required(number("t", std::nullopt, at_least(0),
-                                     "Time of the cut, s; strictly increasing along the list, at most `duration`."))},
+                                     "Time of the cut, s; strictly increasing along the list. A cut after `duration` never happens (the "
+                                     "report warns)."))},
                     "Cut events: at each time the blade, posed by the tool, is removed from the object in rest "
                     "space (SPEC §4); none: the tool only moves (and collides).")},
       "Keyframed instruments that cut the object.");

@@ -495,6 +495,10 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
       }
     };
     run_due_cuts();
+    for (const CutEvent& ev : events)
+      if (ev.t > scene.duration)
+        report.warnings.push_back("cut at t = " + format_seconds(ev.t) + " by " + scene.tools[ev.tool].name +
+                                  " is after the end of the run and does not happen");
 
     // Timeline: fixed steps of dt up to the duration.
     const long steps = step_count(scene);

@@ -145,6 +145,27 @@ TEST(CutPipeline, PunchThroughASlabAtRest) {
   EXPECT_EQ(o.sim->stats().failed_steps, 0);
 }
 
+TEST(CutPipeline, BladeFlushWithTheSurfaceAndOnItsVertices) {
+  // The slab's surface grid has lines every 2.5 mm in x and y and every 2 mm in z. A box blade from 15 to 25 mm in x
+  // and y and from 2 to 4 mm in z has its top face in the slab's top face, its vertices on surface vertices and its
+  // edges along surface edges: every degenerate contact at once. It removes exactly 10 x 10 x 2 mm.
+  Object o = make_object(kSlab, kSlabRoot, 4, 7, {left_handle()});
+  const double v0 = sim::signed_volume(o.cut.surface);
+  const auto out = cut(o, box_mesh({Vec3(0.015, 0.015, 0.002), Vec3(0.025, 0.025, 0.004)}), 0.001);
+  ASSERT_EQ(out.status, "ok") << out.reason;
+  const double expect = 0.01 * 0.01 * 0.002;
+  EXPECT_NEAR(out.removed_volume, expect, 1e-9 * expect);
+  EXPECT_NEAR(v0 - sim::signed_volume(o.cut.surface), expect, 1e-9 * expect);
+  EXPECT_TRUE(watertight(o.cut.surface));
+  EXPECT_EQ(euler_characteristic(o.cut.surface), 2);  // a pocket, no hole
+  EXPECT_EQ(o.sim->model().dofs().check_invariants(), "");
+  // A blade that only touches the top face from outside removes nothing.
+  const auto touch = cut(o, box_mesh({Vec3(0.002, 0.002, 0.004), Vec3(0.008, 0.008, 0.006)}), 0.001);
+  EXPECT_TRUE(touch.status == "no-op" || (touch.status == "ok" && touch.removed_volume == 0.0))
+      << touch.status << " " << touch.reason;
+  EXPECT_TRUE(watertight(o.cut.surface));
+}
+
 TEST(CutPipeline, BladeThatMissesIsANoOp) {
   Object o = make_object(kSlab, kSlabRoot, 4, 7, {left_handle()});
   const sim::TriMesh s0 = o.cut.surface;

@@ -59,7 +59,7 @@ struct SurfaceTrack {
 
   // Applies one boolean result: kept vertices stay in order, inserted ones come after them.
   void apply(SurfaceCutResult&& r) {
-    std::vector<char> gone(mesh.vertices.size(), 0);
+    std::vector<char> gone(origin.size(), 0);  // origin has |V| entries even before the first apply
     for (int v : r.removed_vertices) gone[std::size_t(v)] = 1;
     std::vector<int> next;
     next.reserve(r.mesh.vertices.size());
@@ -226,18 +226,21 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
 
     // ---- 2. surface ------------------------------------------------------------------------------------------------
     t0 = Clock::now();
+    // The first blade cuts object.surface itself; the track copies S only when no blade changed it (S stays as it
+    // is until the commit).
     SurfaceTrack track;
-    track.mesh = object.surface;
-    track.origin.resize(track.mesh.vertices.size());
+    track.origin.resize(object.surface.vertices.size());
     std::iota(track.origin.begin(), track.origin.end(), 0);
     track.cut_face = object.cut_faces;
-    track.cut_face.resize(track.mesh.triangles.size(), 0);
+    track.cut_face.resize(object.surface.triangles.size(), 0);
     bool surface_changed = false;
     SurfaceCutOptions sopt;
     sopt.verify = options.verify;
+    sopt.check_blade_self_intersection = false;  // blades are checked when loaded (or built convex)
     for (sim::TriMesh& b : rest_blades) {
-      if (track.mesh.triangles.empty()) break;
-      SurfaceCutResult r = cut_surface(track.mesh, b, sopt);
+      const sim::TriMesh& current = surface_changed ? track.mesh : object.surface;
+      if (current.triangles.empty()) break;
+      SurfaceCutResult r = cut_surface(current, b, sopt);
       // A degenerate configuration that the boolean refuses (a blade edge through a surface edge at a point, say)
       // is retried with the blade translated by 1e-9, then 1e-7, of its size along a fixed generic direction:
       // simulation of simplicity in its simplest form, deterministic, and far below any tissue scale.
@@ -247,7 +250,7 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
         const sim::Vec3 shift = eps * (bb.max - bb.min).norm() * sim::Vec3(0.5377, 0.8314, 0.1410).normalized();
         sim::TriMesh moved = b;
         for (sim::Vec3& p : moved.vertices) p += shift;
-        SurfaceCutResult again = cut_surface(track.mesh, moved, sopt);
+        SurfaceCutResult again = cut_surface(current, moved, sopt);
         if (again.status != SurfaceCutStatus::failed) {
           b = std::move(moved);
           ++out.perturbed;
@@ -261,6 +264,7 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
       track.apply(std::move(r));
     }
     out.ms.surface = ms_since(t0);
+    if (!surface_changed) track.mesh = object.surface;
 
     // ---- 3. material_graph -----------------------------------------------------------------------------------------
     t0 = Clock::now();

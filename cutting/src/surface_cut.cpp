@@ -935,19 +935,16 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
   {
     // The untouched faces [from, to), remapped (copied as they are when no vertex went).
     const auto copy_faces = [&](int32_t from, int32_t to) {
-      const std::size_t at = out.triangles.size();
-      out.triangles.resize(at + static_cast<std::size_t>(to - from));
-      result.triangle_origin.resize(at + static_cast<std::size_t>(to - from));
-      std::iota(result.triangle_origin.begin() + static_cast<std::ptrdiff_t>(at), result.triangle_origin.end(), from);
+      // Appended without zero-filling first (the capacity is reserved).
+      for (int32_t f = from; f < to; ++f) result.triangle_origin.push_back(f);
       if (result.removed_vertices.empty()) {
-        std::copy(surface.triangles.begin() + from, surface.triangles.begin() + to, out.triangles.begin() + static_cast<std::ptrdiff_t>(at));
+        out.triangles.insert(out.triangles.end(), surface.triangles.begin() + from, surface.triangles.begin() + to);
         return;
       }
-      Tri* dst = out.triangles.data() + at;
-      for (int32_t f = from; f < to; ++f, ++dst) {
+      for (int32_t f = from; f < to; ++f) {
         const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
-        *dst = {old_to_new[static_cast<std::size_t>(t[0])], old_to_new[static_cast<std::size_t>(t[1])],
-                old_to_new[static_cast<std::size_t>(t[2])]};
+        out.triangles.push_back({old_to_new[static_cast<std::size_t>(t[0])], old_to_new[static_cast<std::size_t>(t[1])],
+                                 old_to_new[static_cast<std::size_t>(t[2])]});
       }
     };
     int32_t next_face = 0;
@@ -970,7 +967,6 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
         const Tri& n = p_pieces[static_cast<std::size_t>(k)].first;
         const Tri o{out_index(n[0]), out_index(n[1]), out_index(n[2])};
         changed.push_back(static_cast<int32_t>(out.triangles.size()));
-      changed_whole.push_back(0);
         changed_whole.push_back(whole ? 1 : 0);
         out.triangles.push_back(o);
         result.triangle_origin.push_back(f);

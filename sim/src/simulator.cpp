@@ -44,7 +44,8 @@ struct FemSystem::Impl {
   // Fixed sparse pattern of the system matrix, built on the first assemble_system call.
   bool have_pattern = false;
   std::vector<char> pattern_constrained;          // constrained flags the pattern was built for (num_dofs)
-  std::vector<std::vector<int>> pair_offsets;     // per element, per (p, q) entry pair: 3 column offsets, or -1
+  std::vector<int> pair_offsets;                  // per element, per (p, q) entry pair: 3 column offsets, or -1
+  std::vector<std::size_t> pair_begin;            // start of each element's pair offsets (num_elements + 1)
   std::vector<int> diag_offsets;                  // per scalar DOF: offset of its diagonal entry (3 num_dofs)
   std::vector<double> rotated;                    // per element R K R^T, scaled (num_elements x 576)
 
@@ -82,89 +83,129 @@ struct FemSystem::Impl {
   void build_pattern(const std::vector<char>& constrained) {
     const int nd = model.num_dofs();
     const int ne = model.num_elements();
-    // Block structure first (3 x 3 blocks of DOF pairs): the free DOFs each element couples, sorted and unique, and
-    // per block column the sorted block rows. Every diagonal block is present, constrained DOFs included.
-    std::vector<std::vector<int>> elem_dofs(static_cast<std::size_t>(ne));  // free DOFs of each element, ascending
-    std::vector<std::vector<int>> rows(static_cast<std::size_t>(nd)); // block rows of each block column, ascending
-    for (int d = 0; d < nd; ++d) rows[std::size_t(d)].push_back(d);
+    // Block structure first (3 x 3 blocks of DOF pairs), in flat arrays: the free DOFs each element couples, sorted
+    // and unique (elem_ptr, elem_dof), the elements of each DOF (dof_ptr, dof_elem), and per block column the sorted
+    // block rows (col_ptr, col_row), the union of its elements' DOFs. Every diagonal block is present, constrained
+    // DOFs included.
+    std::vector<int> elem_ptr(std::size_t(ne) + 1), elem_dof;
+    std::size_t gathered = 0;
+    for (const auto& g : gather) gathered += g.size();
+    elem_dof.reserve(gathered);
+    std::vector<int> dof_ptr(std::size_t(nd) + 1, 0);
     for (int e = 0; e < ne; ++e) {
-      auto& u = elem_dofs[std::size_t(e)];
+      const std::size_t b = elem_dof.size();
+      elem_ptr[std::size_t(e)] = int(b);
       for (const GatherEntry& p : gather[std::size_t(e)])
-        if (!constrained[std::size_t(p.dof)]) u.push_back(p.dof);
-      std::sort(u.begin(), u.end());
-      u.erase(std::unique(u.begin(), u.end()), u.end());
-      for (int k : u) rows[std::size_t(k)].insert(rows[std::size_t(k)].end(), u.begin(), u.end());
+        if (!constrained[std::size_t(p.dof)]) elem_dof.push_back(p.dof);
+      std::sort(elem_dof.begin() + std::ptrdiff_t(b), elem_dof.end());
+      elem_dof.erase(std::unique(elem_dof.begin() + std::ptrdiff_t(b), elem_dof.end()), elem_dof.end());
+      for (std::size_t i = b; i < elem_dof.size(); ++i) ++dof_ptr[std::size_t(elem_dof[i]) + 1];
     }
-    for (auto& r : rows) {
-      std::sort(r.begin(), r.end());
-      r.erase(std::unique(r.begin(), r.end()), r.end());
+    elem_ptr[std::size_t(ne)] = int(elem_dof.size());
+    for (int d = 0; d < nd; ++d) dof_ptr[std::size_t(d) + 1] += dof_ptr[std::size_t(d)];
+    std::vector<int> dof_elem(elem_dof.size());
+    {
+      std::vector<int> fill(dof_ptr.begin(), dof_ptr.end() - 1);
+      for (int e = 0; e < ne; ++e)
+        for (int i = elem_ptr[std::size_t(e)]; i < elem_ptr[std::size_t(e) + 1]; ++i)
+          dof_elem[std::size_t(fill[std::size_t(elem_dof[std::size_t(i)])]++)] = e;
     }
-    // Scalar CSC: column 3k + c holds rows 3j, 3j + 1, 3j + 2 for every block row j of block column k.
-    SpMat A(3 * nd, 3 * nd);
-    std::size_t nnz = 0;
-    for (const auto& r : rows) nnz += 9 * r.size();
-    A.resizeNonZeros(Eigen::Index(nnz));
-    int* outer = A.outerIndexPtr();
-    int* inner = A.innerIndexPtr();
-    int at = 0;
-    for (int k = 0; k < nd; ++k) {
-      for (int c = 0; c < 3; ++c) {
-        outer[3 * k + c] = at;
-        for (int j : rows[std::size_t(k)])
-          for (int r = 0; r < 3; ++r) inner[at++] = 3 * j + r;
-      }
-    }
-    outer[3 * nd] = at;
-    std::fill(A.valuePtr(), A.valuePtr() + nnz, 0.0);
-    pattern = std::move(A);
-
-    // Offsets: the entry of block (j, k) in column 3k + c is outer[3k + c] + 3 pos(j in rows[k]). Positions come
-    // from one merge walk per (element, free DOF) instead of a search per entry.
-    const int* out_ptr = pattern.outerIndexPtr();
-    pair_offsets.assign(std::size_t(ne), {});
-    std::vector<int> local;  // index in elem_dofs of each gather entry, -1 when constrained
-    std::vector<int> pos;    // pos[a * n + b]: position of elem_dofs[b] in rows[elem_dofs[a]]
-    for (int e = 0; e < ne; ++e) {
-      const auto& g = gather[std::size_t(e)];
-      const auto& u = elem_dofs[std::size_t(e)];
-      const std::size_t n = u.size();
-      pos.assign(n * n, 0);
-      for (std::size_t a2 = 0; a2 < n; ++a2) {
-        const auto& r = rows[std::size_t(u[a2])];
-        std::size_t i = 0;
-        for (std::size_t b2 = 0; b2 < n; ++b2) {
-          while (r[i] < u[b2]) ++i;
-          pos[a2 * n + b2] = int(i);
-        }
-      }
-      local.resize(g.size());
-      for (std::size_t i = 0; i < g.size(); ++i)
-        local[i] = constrained[std::size_t(g[i].dof)]
-                       ? -1
-                       : int(std::lower_bound(u.begin(), u.end(), g[i].dof) - u.begin());
-      auto& off = pair_offsets[std::size_t(e)];
-      off.clear();
-      off.reserve(3 * g.size() * g.size());
-      for (std::size_t pi = 0; pi < g.size(); ++pi)
-        for (std::size_t qi = 0; qi < g.size(); ++qi) {
-          if (local[pi] < 0 || local[qi] < 0) {
-            off.insert(off.end(), {-1, -1, -1});
-            continue;
+    std::vector<int> col_ptr(std::size_t(nd) + 1), col_row;
+    col_row.reserve(elem_dof.size() * 8 + std::size_t(nd));
+    {
+      std::vector<int> mark(std::size_t(nd), -1);  // mark[j] == k: j is already a row of column k
+      for (int k = 0; k < nd; ++k) {
+        const std::size_t b = col_row.size();
+        col_ptr[std::size_t(k)] = int(b);
+        col_row.push_back(k);
+        mark[std::size_t(k)] = k;
+        for (int t = dof_ptr[std::size_t(k)]; t < dof_ptr[std::size_t(k) + 1]; ++t) {
+          const int e = dof_elem[std::size_t(t)];
+          for (int i = elem_ptr[std::size_t(e)]; i < elem_ptr[std::size_t(e) + 1]; ++i) {
+            const int j = elem_dof[std::size_t(i)];
+            if (mark[std::size_t(j)] != k) {
+              mark[std::size_t(j)] = k;
+              col_row.push_back(j);
+            }
           }
-          const int k = g[qi].dof;
-          const int p3 = 3 * pos[std::size_t(local[qi]) * n + std::size_t(local[pi])];
-          for (int c = 0; c < 3; ++c) off.push_back(out_ptr[3 * k + c] + p3);
         }
+        std::sort(col_row.begin() + std::ptrdiff_t(b), col_row.end());
+      }
+      col_ptr[std::size_t(nd)] = int(col_row.size());
     }
-    // Offset of a scalar entry (row, col) in the pattern.
-    auto offset = [&](int row, int col) {
-      const int* idx = pattern.innerIndexPtr();
-      const int b = pattern.outerIndexPtr()[col], en = pattern.outerIndexPtr()[col + 1];
-      const int* it = std::lower_bound(idx + b, idx + en, row);
-      return int(it - idx);
-    };
+    // Scalar CSC: column 3k + c holds rows 3j, 3j + 1, 3j + 2 for every block row j of block column k; it starts at
+    // 9 col_ptr[k] + 3 c len(k). Filled in parallel by block column (disjoint ranges).
+    const std::size_t nnz = 9 * col_row.size();
+    if (pattern.rows() != 3 * nd || pattern.cols() != 3 * nd) pattern = SpMat(3 * nd, 3 * nd);
+    pattern.resizeNonZeros(Eigen::Index(nnz));
+    int* outer = pattern.outerIndexPtr();
+    int* inner = pattern.innerIndexPtr();
+    double* values = pattern.valuePtr();
     diag_offsets.resize(3 * std::size_t(nd));
-    for (int i = 0; i < 3 * nd; ++i) diag_offsets[std::size_t(i)] = offset(i, i);
+    executor.parallel_for(nd, 256, [&](int kb, int ke) {
+      for (int k = kb; k < ke; ++k) {
+        const int b = col_ptr[std::size_t(k)], len = col_ptr[std::size_t(k) + 1] - b;
+        const int* rows = col_row.data() + b;
+        const int diag = 3 * int(std::lower_bound(rows, rows + len, k) - rows);
+        int at = 9 * b;
+        std::fill(values + at, values + at + 9 * len, 0.0);
+        for (int c = 0; c < 3; ++c) {
+          outer[3 * k + c] = at;
+          diag_offsets[3 * std::size_t(k) + std::size_t(c)] = at + diag + c;
+          for (int t = b; t < b + len; ++t) {
+            const int j = col_row[std::size_t(t)];
+            inner[at++] = 3 * j;
+            inner[at++] = 3 * j + 1;
+            inner[at++] = 3 * j + 2;
+          }
+        }
+      }
+    });
+    outer[3 * nd] = int(nnz);
+
+    // Offsets: the entry of block (j, k) in column 3k + c is outer[3k + c] + 3 pos(j in column k). Positions come
+    // from one merge walk per (element, free DOF) instead of a search per entry. Independent per element: parallel.
+    const int* out_ptr = pattern.outerIndexPtr();
+    pair_begin.resize(std::size_t(ne) + 1);
+    std::size_t pairs = 0;
+    for (int e = 0; e < ne; ++e) {
+      pair_begin[std::size_t(e)] = pairs;
+      pairs += 3 * gather[std::size_t(e)].size() * gather[std::size_t(e)].size();
+    }
+    pair_begin[std::size_t(ne)] = pairs;
+    pair_offsets.resize(pairs);
+    executor.parallel_for(ne, kGrain, [&](int eb, int ee) {
+      std::vector<int> local;  // index in the element's DOF list of each gather entry, -1 when constrained
+      std::vector<int> pos;    // pos[a * n + b]: position of DOF b in block column a (element-local indices)
+      for (int e = eb; e < ee; ++e) {
+        const auto& g = gather[std::size_t(e)];
+        const int* u = elem_dof.data() + elem_ptr[std::size_t(e)];
+        const std::size_t n = std::size_t(elem_ptr[std::size_t(e) + 1] - elem_ptr[std::size_t(e)]);
+        pos.resize(n * n);
+        for (std::size_t a2 = 0; a2 < n; ++a2) {
+          const int* r = col_row.data() + col_ptr[std::size_t(u[a2])];
+          std::size_t i = 0;
+          for (std::size_t b2 = 0; b2 < n; ++b2) {
+            while (r[i] < u[b2]) ++i;
+            pos[a2 * n + b2] = int(i);
+          }
+        }
+        local.resize(g.size());
+        for (std::size_t i = 0; i < g.size(); ++i)
+          local[i] = constrained[std::size_t(g[i].dof)] ? -1 : int(std::lower_bound(u, u + n, g[i].dof) - u);
+        int* off = pair_offsets.data() + pair_begin[std::size_t(e)];
+        for (std::size_t pi = 0; pi < g.size(); ++pi)
+          for (std::size_t qi = 0; qi < g.size(); ++qi, off += 3) {
+            if (local[pi] < 0 || local[qi] < 0) {
+              off[0] = off[1] = off[2] = -1;
+              continue;
+            }
+            const int k = g[qi].dof;
+            const int p3 = 3 * pos[std::size_t(local[qi]) * n + std::size_t(local[pi])];
+            for (int c = 0; c < 3; ++c) off[c] = out_ptr[3 * k + c] + p3;
+          }
+      }
+    });
     pattern_constrained = constrained;
     have_pattern = true;
   }
@@ -307,7 +348,7 @@ void FemSystem::assemble_system(double mc, double kc, const ElementFrame& frame,
   for (int e = 0; e < ne; ++e) {
     const Eigen::Map<const Mat24> Ke(im.rotated.data() + 576 * std::size_t(e));
     const auto& g = im.gather[std::size_t(e)];
-    const int* off = im.pair_offsets[std::size_t(e)].data();
+    const int* off = im.pair_offsets.data() + im.pair_begin[std::size_t(e)];
     for (const GatherEntry& p : g) {
       for (const GatherEntry& q : g) {
         const double w = p.w * q.w;
@@ -377,9 +418,9 @@ void Simulator::set_model(ObjectModel model) {
 
 void Simulator::refresh_solver() {
   if (m_model.num_dofs() == 0) return;
-  // The pattern is all the symbolic analysis needs; the values come with the next step's assembly.
-  m_A = m_fem->system_pattern(m_constrained);
-  m_solver->analyze_pattern(m_A);
+  // The pattern is all the symbolic analysis needs. m_A stays empty: the next step's assembly copies the pattern
+  // into it with the values.
+  m_solver->analyze_pattern(m_fem->system_pattern(m_constrained));
   m_pattern_analyzed = true;
 }
 

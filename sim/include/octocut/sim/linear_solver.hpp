@@ -28,6 +28,9 @@ class LinearSolver {
   /// Solves A x = b for the A last given to factorize(). x holds the warm start on entry (pcg).
   virtual SolveInfo solve(const VecX& b, VecX& x) = 0;
   [[nodiscard]] virtual std::string name() const = 0;
+  /// Block size of the graph the last fill-reducing ordering was computed on: 3 when A is made of 3 x 3 blocks (the
+  /// FEM system: one node per DOF), 1 for a scalar pattern, 0 when the solver does not factorise.
+  [[nodiscard]] virtual int ordering_block_size() const { return 0; }
 };
 
 struct LinearSolverOptions {

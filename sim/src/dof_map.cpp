@@ -99,17 +99,10 @@ std::array<int, 8> octant_leaves(const Octree& tree, const GridPoint& n) {
   return leaf;
 }
 
-// True when some leaf has n as a corner, i.e. n is a logical node of the tree.
-bool is_node(const Octree& tree, const GridPoint& n) {
-  const std::array<int, 8> leaf = octant_leaves(tree, n);
-  return std::any_of(leaf.begin(), leaf.end(), [&](int l) { return l >= 0 && tree.leaf(l).has_corner(n); });
-}
-
 // Node splitting at one logical node: appends its DOFs to `map` and sets the bindings of its slots.
-void process_node(std::uint64_t key, const Octree& tree, const RootGeometry& root, ConnectivityCache& connected,
-                  DofMap& map, std::vector<SlotBinding>& binding) {
+void process_node(std::uint64_t key, const std::array<int, 8>& leaf, const Octree& tree, const RootGeometry& root,
+                  ConnectivityCache& connected, DofMap& map, std::vector<SlotBinding>& binding) {
   const GridPoint n = node_from_key(key);
-  const std::array<int, 8> leaf = octant_leaves(tree, n);
 
   // Graph G_i: same leaf, or face-adjacent octants whose leaves are connected.
   OctantSets sets;
@@ -327,7 +320,7 @@ DofMap build_dof_map(const Octree& tree, const RootGeometry& root, const Materia
   map.node_dof_begin.reserve(map.nodes.size() + 1);
   for (const std::uint64_t key : map.nodes) {
     map.node_dof_begin.push_back(map.num_dofs);
-    process_node(key, tree, root, connected, map, binding);
+    process_node(key, octant_leaves(tree, node_from_key(key)), tree, root, connected, map, binding);
   }
   map.node_dof_begin.push_back(map.num_dofs);
   resolve_rows(binding, tree, map);
@@ -372,7 +365,6 @@ DofMap update_dof_map(const DofMap& old, const Octree& old_tree, const Octree& t
       for (int k = 0; k < 8; ++k) candidates.push_back(node_key(tree.leaf(j).corner(k)));
   std::sort(candidates.begin(), candidates.end());
   candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
-  std::erase_if(candidates, [&](std::uint64_t key) { return !is_node(tree, node_from_key(key)); });
 
   // Walk the merged node list in key order: clean nodes copy their DOFs, dirty nodes are split anew.
   DofMap map;
@@ -381,8 +373,21 @@ DofMap update_dof_map(const DofMap& old, const Octree& old_tree, const Octree& t
   std::vector<int> old_dof_to_new(std::size_t(old.num_dofs), -1);
   std::size_t oi = 0, ci = 0;
   map.nodes.reserve(old.nodes.size() + candidates.size());
+  std::array<int, 8> candidate_leaves{};  // octant leaves of candidates[checked]
+  std::size_t checked = candidates.size();
   while (true) {
     while (oi < old.nodes.size() && dirty.contains(node_from_key(old.nodes[oi]))) ++oi;
+    // A candidate stays a node when some new leaf has it as a corner; each is looked at once.
+    while (ci < candidates.size() && checked != ci) {
+      const GridPoint n = node_from_key(candidates[ci]);
+      candidate_leaves = octant_leaves(tree, n);
+      if (std::any_of(candidate_leaves.begin(), candidate_leaves.end(),
+                      [&](int l) { return l >= 0 && tree.leaf(l).has_corner(n); })) {
+        checked = ci;
+        break;
+      }
+      ++ci;
+    }
     const bool have_old = oi < old.nodes.size(), have_new = ci < candidates.size();
     if (!have_old && !have_new) break;
     map.node_dof_begin.push_back(map.num_dofs);
@@ -399,7 +404,7 @@ DofMap update_dof_map(const DofMap& old, const Octree& old_tree, const Octree& t
       ++oi;
     } else {
       map.nodes.push_back(candidates[ci]);
-      process_node(candidates[ci], tree, root, connected, map, binding);
+      process_node(candidates[ci], candidate_leaves, tree, root, connected, map, binding);
       ++ci;
     }
   }

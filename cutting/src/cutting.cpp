@@ -295,24 +295,19 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     // ---- 4. refine, then node_split --------------------------------------------------------------------------------
     t0 = Clock::now();
     const double le = request.inscribed_radius / std::sqrt(3.0);
-    sim::ObjectModel next = model;
-    for (;;) {
-      std::vector<int> split;
-      for (int e = 0; e < next.num_elements(); ++e) {
-        const sim::Cell& c = next.tree().leaf(e);
-        if (c.level >= next.max_level() || !(next.edge()[std::size_t(e)] > le)) continue;
-        const sim::Box3 box = root.cell_box(c);
-        for (const BladeVolume& bv : rest_volumes) {
-          if (boxes_overlap(box, bv.bounds()) && bv.overlaps_box(box)) {
-            split.push_back(e);
-            break;
-          }
-        }
-      }
-      if (split.empty()) break;
-      out.leaves_refined += int(split.size());
-      next = next.refined(split);
-    }
+    // Leaves that meet a rest-space blade with an edge above l_e, level after level, refined in one revision. When
+    // tets go, that revision takes the new material too: the leaves the cut touches are measured once and the DOFs
+    // are split in the same update, so with_material below finds its work done.
+    auto meets_blade = [&](const sim::Cell& c) {
+      if (c.level >= model.max_level() || !(root.cell_edge(c) > le)) return false;
+      const sim::Box3 box = root.cell_box(c);
+      return std::any_of(rest_volumes.begin(), rest_volumes.end(), [&](const BladeVolume& bv) {
+        return boxes_overlap(box, bv.bounds()) && bv.overlaps_box(box);
+      });
+    };
+    sim::ObjectModel next = !dead.empty() && graph->num_tets() > 0
+                                ? model.refined_with_material(meets_blade, graph, changed, &out.leaves_refined)
+                                : model.refined_where(meets_blade, &out.leaves_refined);
     out.ms.refine = ms_since(t0);
 
     t0 = Clock::now();

@@ -25,11 +25,11 @@ struct OctantSets {
   }
 };
 
-// How one slot is resolved before chains are followed: a DOF, or bound to the corners of a bigger leaf.
+// How one slot is resolved before chains are followed: a DOF, or bound to the corners of a bigger leaf (with the
+// master's trilinear weights at the slot's node, computed when the row is resolved).
 struct SlotBinding {
-  int dof = -1;                     // >= 0: the slot is this DOF
-  int master = -1;                  // >= 0: hard-bound to this leaf's corner slots
-  std::array<double, 8> weights{};  // trilinear weights of the master's corners at the slot's node
+  int dof = -1;     // >= 0: the slot is this DOF
+  int master = -1;  // >= 0: hard-bound to this leaf's corner slots
 };
 
 }  // namespace
@@ -99,17 +99,10 @@ std::array<int, 8> octant_leaves(const Octree& tree, const GridPoint& n) {
   return leaf;
 }
 
-// True when some leaf has n as a corner, i.e. n is a logical node of the tree.
-bool is_node(const Octree& tree, const GridPoint& n) {
-  const std::array<int, 8> leaf = octant_leaves(tree, n);
-  return std::any_of(leaf.begin(), leaf.end(), [&](int l) { return l >= 0 && tree.leaf(l).has_corner(n); });
-}
-
 // Node splitting at one logical node: appends its DOFs to `map` and sets the bindings of its slots.
-void process_node(std::uint64_t key, const Octree& tree, const RootGeometry& root, ConnectivityCache& connected,
-                  DofMap& map, std::vector<SlotBinding>& binding) {
+void process_node(std::uint64_t key, const std::array<int, 8>& leaf, const Octree& tree, const RootGeometry& root,
+                  ConnectivityCache& connected, DofMap& map, std::vector<SlotBinding>& binding) {
   const GridPoint n = node_from_key(key);
-  const std::array<int, 8> leaf = octant_leaves(tree, n);
 
   // Graph G_i: same leaf, or face-adjacent octants whose leaves are connected.
   OctantSets sets;
@@ -153,54 +146,90 @@ void process_node(std::uint64_t key, const Octree& tree, const RootGeometry& roo
         if (map.dof_slot[std::size_t(dof)] < 0) map.dof_slot[std::size_t(dof)] = int(s);
       } else {
         binding[s].master = master;
-        binding[s].weights = trilinear_weights(tree.leaf(master).local(n));
       }
     }
   }
 }
 
 // Turns the slot bindings into the CSR rows of P, following chains of hard binding. A master is always strictly
-// coarser than the bound slot's leaf, so the recursion ends. Only hanging rows are memoised.
-void resolve_rows(const std::vector<SlotBinding>& binding, DofMap& map) {
-  const int num_slots = int(binding.size());
-  using Row = std::vector<std::pair<int, double>>;
-  std::unordered_map<int, Row> hanging_rows;
-  std::function<const Row&(int, int)> resolve_hanging = [&](int s, int depth) -> const Row& {
-    if (auto it = hanging_rows.find(s); it != hanging_rows.end()) return it->second;
+// coarser than the bound slot's leaf, so the recursion ends. Only hanging rows are memoised, in one pool.
+class RowResolver {
+ public:
+  RowResolver(const std::vector<SlotBinding>& binding, const Octree& tree)
+      : m_binding(binding), m_tree(tree), m_row(binding.size(), {-1, -1}) {}
+
+  // The resolved row of hanging slot s: entries [first, second) of dofs() and weights().
+  std::pair<int, int> hanging(int s, int depth) {
+    if (m_row[std::size_t(s)].first >= 0) return m_row[std::size_t(s)];
     if (depth > kMaxDepth + 1) throw std::logic_error("build_dof_map: cyclic hard binding");
-    const SlotBinding& b = binding[std::size_t(s)];
-    Row acc;
+    const SlotBinding& b = m_binding[std::size_t(s)];
+    // The master's trilinear weights at the slot's node.
+    const std::array<double, 8> corner_w =
+        trilinear_weights(m_tree.leaf(b.master).local(m_tree.leaf(s / 8).corner(s % 8)));
+    // Rows of hanging master slots first, so that the pool does not grow while this row is gathered.
     for (int k = 0; k < 8; ++k) {
-      const double w = b.weights[std::size_t(k)];
+      const int ms = 8 * b.master + k;
+      if (corner_w[std::size_t(k)] != 0.0 && m_binding[std::size_t(ms)].dof < 0) (void)hanging(ms, depth + 1);
+    }
+    m_acc.clear();
+    for (int k = 0; k < 8; ++k) {
+      const double w = corner_w[std::size_t(k)];
       if (w == 0.0) continue;
       const int ms = 8 * b.master + k;
-      const SlotBinding& mb = binding[std::size_t(ms)];
+      const SlotBinding& mb = m_binding[std::size_t(ms)];
       if (mb.dof >= 0) {
-        acc.emplace_back(mb.dof, w);
+        m_acc.emplace_back(mb.dof, w);
       } else {
-        for (const auto& [d, wd] : resolve_hanging(ms, depth + 1)) acc.emplace_back(d, w * wd);
+        const auto [r0, r1] = m_row[std::size_t(ms)];
+        for (int i = r0; i < r1; ++i) m_acc.emplace_back(m_dof[std::size_t(i)], w * m_weight[std::size_t(i)]);
       }
     }
     // Merge the entries of each DOF, in DOF order.
-    std::sort(acc.begin(), acc.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-    Row row;
-    for (const auto& [d, w] : acc) {
-      if (!row.empty() && row.back().first == d)
-        row.back().second += w;
-      else
-        row.emplace_back(d, w);
+    std::sort(m_acc.begin(), m_acc.end(), [](const auto& x, const auto& y) { return x.first < y.first; });
+    const int begin = int(m_dof.size());
+    for (const auto& [d, w] : m_acc) {
+      if (int(m_dof.size()) > begin && m_dof.back() == d)
+        m_weight.back() += w;
+      else {
+        m_dof.push_back(d);
+        m_weight.push_back(w);
+      }
     }
-    std::erase_if(row, [](const auto& e) { return e.second == 0.0; });
-    return hanging_rows.emplace(s, std::move(row)).first->second;
-  };
+    // Drop entries that cancelled to zero.
+    int end = begin;
+    for (int i = begin; i < int(m_dof.size()); ++i) {
+      if (m_weight[std::size_t(i)] == 0.0) continue;
+      m_dof[std::size_t(end)] = m_dof[std::size_t(i)];
+      m_weight[std::size_t(end)] = m_weight[std::size_t(i)];
+      ++end;
+    }
+    m_dof.resize(std::size_t(end));
+    m_weight.resize(std::size_t(end));
+    return m_row[std::size_t(s)] = {begin, end};
+  }
+  [[nodiscard]] const std::vector<int>& dofs() const { return m_dof; }
+  [[nodiscard]] const std::vector<double>& weights() const { return m_weight; }
+
+ private:
+  const std::vector<SlotBinding>& m_binding;
+  const Octree& m_tree;
+  std::vector<std::pair<int, int>> m_row;           // pool range of each hanging slot's row, -1 until resolved
+  std::vector<int> m_dof;                           // pooled row entries: DOF
+  std::vector<double> m_weight;                     // pooled row entries: weight
+  std::vector<std::pair<int, double>> m_acc;        // scratch for one row
+};
+
+void resolve_rows(const std::vector<SlotBinding>& binding, const Octree& tree, DofMap& map) {
+  const int num_slots = int(binding.size());
+  RowResolver rows(binding, tree);
   map.hanging_slots = 0;
   map.slot_master.assign(std::size_t(num_slots), -1);
   map.slot_begin.clear();
   map.slot_dof.clear();
   map.slot_weight.clear();
   map.slot_begin.reserve(std::size_t(num_slots) + 1);
-  map.slot_dof.reserve(std::size_t(num_slots));
-  map.slot_weight.reserve(std::size_t(num_slots));
+  map.slot_dof.reserve(std::size_t(num_slots) + std::size_t(num_slots) / 2);
+  map.slot_weight.reserve(std::size_t(num_slots) + std::size_t(num_slots) / 2);
   map.slot_begin.push_back(0);
   for (int s = 0; s < num_slots; ++s) {
     const SlotBinding& b = binding[std::size_t(s)];
@@ -210,10 +239,9 @@ void resolve_rows(const std::vector<SlotBinding>& binding, DofMap& map) {
     } else if (b.master >= 0) {
       ++map.hanging_slots;
       map.slot_master[std::size_t(s)] = b.master;
-      for (const auto& [d, w] : resolve_hanging(s, 0)) {
-        map.slot_dof.push_back(d);
-        map.slot_weight.push_back(w);
-      }
+      const auto [r0, r1] = rows.hanging(s, 0);
+      map.slot_dof.insert(map.slot_dof.end(), rows.dofs().begin() + r0, rows.dofs().begin() + r1);
+      map.slot_weight.insert(map.slot_weight.end(), rows.weights().begin() + r0, rows.weights().begin() + r1);
     } else {
       throw std::logic_error("build_dof_map: a slot was not reached by its node");
     }
@@ -221,12 +249,15 @@ void resolve_rows(const std::vector<SlotBinding>& binding, DofMap& map) {
   }
 }
 
-// Closed grid boxes of the cells whose DOFs must be recomputed, with their common bounding box for a quick reject.
+// Closed grid boxes of the cells whose DOFs must be recomputed. After finalize(), a point is looked up in a sorted
+// list of (bucket, box) pairs: buckets are cubes of the largest box's edge, so each box meets at most 8 of them and a
+// point only tests the few boxes of its own bucket.
 class DirtyRegion {
  public:
   void add(const Cell& c) {
     const GridPoint lo = c.anchor, hi = c.corner(7);
     m_boxes.push_back({lo, hi});
+    m_shift = std::max(m_shift, kMaxDepth - c.level);
     if (m_boxes.size() == 1) {
       m_lo = lo;
       m_hi = hi;
@@ -235,16 +266,38 @@ class DirtyRegion {
       m_hi = {std::max(m_hi.x, hi.x), std::max(m_hi.y, hi.y), std::max(m_hi.z, hi.z)};
     }
   }
+  // Files every box under each bucket its closed box meets; call after the last add() and before contains().
+  void finalize() {
+    m_index.clear();
+    m_index.reserve(8 * m_boxes.size());
+    for (std::size_t b = 0; b < m_boxes.size(); ++b) {
+      const GridPoint lo = m_boxes[b].first, hi = m_boxes[b].second;
+      for (std::uint32_t z = lo.z >> m_shift; z <= hi.z >> m_shift; ++z)
+        for (std::uint32_t y = lo.y >> m_shift; y <= hi.y >> m_shift; ++y)
+          for (std::uint32_t x = lo.x >> m_shift; x <= hi.x >> m_shift; ++x)
+            m_index.emplace_back(node_key({x, y, z}), int(b));
+    }
+    std::sort(m_index.begin(), m_index.end());
+  }
   bool contains(const GridPoint& p) const {
     auto inside = [&p](const GridPoint& lo, const GridPoint& hi) {
       return p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z;
     };
     if (m_boxes.empty() || !inside(m_lo, m_hi)) return false;
-    return std::any_of(m_boxes.begin(), m_boxes.end(), [&](const auto& b) { return inside(b.first, b.second); });
+    // A box that holds p meets p's bucket, so it is filed under it.
+    const std::uint64_t bucket = node_key({p.x >> m_shift, p.y >> m_shift, p.z >> m_shift});
+    auto it = std::lower_bound(m_index.begin(), m_index.end(), std::make_pair(bucket, -1));
+    for (; it != m_index.end() && it->first == bucket; ++it) {
+      const auto& b = m_boxes[std::size_t(it->second)];
+      if (inside(b.first, b.second)) return true;
+    }
+    return false;
   }
 
  private:
   std::vector<std::pair<GridPoint, GridPoint>> m_boxes;
+  std::vector<std::pair<std::uint64_t, int>> m_index;  // (bucket key, box), sorted
+  int m_shift = 0;                                     // log2 of the bucket edge, finest-grid units
   GridPoint m_lo, m_hi;
 };
 
@@ -267,10 +320,10 @@ DofMap build_dof_map(const Octree& tree, const RootGeometry& root, const Materia
   map.node_dof_begin.reserve(map.nodes.size() + 1);
   for (const std::uint64_t key : map.nodes) {
     map.node_dof_begin.push_back(map.num_dofs);
-    process_node(key, tree, root, connected, map, binding);
+    process_node(key, octant_leaves(tree, node_from_key(key)), tree, root, connected, map, binding);
   }
   map.node_dof_begin.push_back(map.num_dofs);
-  resolve_rows(binding, map);
+  resolve_rows(binding, tree, map);
   return map;
 }
 
@@ -300,6 +353,7 @@ DofMap update_dof_map(const DofMap& old, const Octree& old_tree, const Octree& t
       }
     }
   }
+  dirty.finalize();
 
   // Nodes: old nodes outside the dirty region stay; inside it, old nodes and the corners of added leaves are
   // candidates that remain nodes when some new leaf has them as a corner.
@@ -311,7 +365,6 @@ DofMap update_dof_map(const DofMap& old, const Octree& old_tree, const Octree& t
       for (int k = 0; k < 8; ++k) candidates.push_back(node_key(tree.leaf(j).corner(k)));
   std::sort(candidates.begin(), candidates.end());
   candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
-  std::erase_if(candidates, [&](std::uint64_t key) { return !is_node(tree, node_from_key(key)); });
 
   // Walk the merged node list in key order: clean nodes copy their DOFs, dirty nodes are split anew.
   DofMap map;
@@ -320,8 +373,21 @@ DofMap update_dof_map(const DofMap& old, const Octree& old_tree, const Octree& t
   std::vector<int> old_dof_to_new(std::size_t(old.num_dofs), -1);
   std::size_t oi = 0, ci = 0;
   map.nodes.reserve(old.nodes.size() + candidates.size());
+  std::array<int, 8> candidate_leaves{};  // octant leaves of candidates[checked]
+  std::size_t checked = candidates.size();
   while (true) {
     while (oi < old.nodes.size() && dirty.contains(node_from_key(old.nodes[oi]))) ++oi;
+    // A candidate stays a node when some new leaf has it as a corner; each is looked at once.
+    while (ci < candidates.size() && checked != ci) {
+      const GridPoint n = node_from_key(candidates[ci]);
+      candidate_leaves = octant_leaves(tree, n);
+      if (std::any_of(candidate_leaves.begin(), candidate_leaves.end(),
+                      [&](int l) { return l >= 0 && tree.leaf(l).has_corner(n); })) {
+        checked = ci;
+        break;
+      }
+      ++ci;
+    }
     const bool have_old = oi < old.nodes.size(), have_new = ci < candidates.size();
     if (!have_old && !have_new) break;
     map.node_dof_begin.push_back(map.num_dofs);
@@ -338,7 +404,7 @@ DofMap update_dof_map(const DofMap& old, const Octree& old_tree, const Octree& t
       ++oi;
     } else {
       map.nodes.push_back(candidates[ci]);
-      process_node(candidates[ci], tree, root, connected, map, binding);
+      process_node(candidates[ci], candidate_leaves, tree, root, connected, map, binding);
       ++ci;
     }
   }
@@ -358,11 +424,10 @@ DofMap update_dof_map(const DofMap& old, const Octree& old_tree, const Octree& t
         binding[ns].dof = old_dof_to_new[std::size_t(old.slot_dof[std::size_t(old.slot_begin[os])])];
       } else {
         binding[ns].master = old_to_new[std::size_t(master)];
-        binding[ns].weights = trilinear_weights(tree.leaf(binding[ns].master).local(n));
       }
     }
   }
-  resolve_rows(binding, map);
+  resolve_rows(binding, tree, map);
   return map;
 }
 

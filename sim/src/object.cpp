@@ -18,6 +18,32 @@ Mat3 euler_xyz(const Vec3& deg) {
       .toRotationMatrix();
 }
 
+// The boxes where a cut changed the material: a leaf is touched when its closed box meets one of them, grown by a
+// round-off margin `eps` (m), so that a change that only reaches a leaf's face still redoes that face.
+class ChangedRegion {
+ public:
+  ChangedRegion(const std::vector<Box3>& changed, double eps) : m_changed(changed), m_eps(eps) {
+    if (changed.empty()) return;
+    m_all = changed.front();  // bounding box of the changed boxes, for a quick reject
+    for (const Box3& b : changed) {
+      m_all.min = m_all.min.cwiseMin(b.min);
+      m_all.max = m_all.max.cwiseMax(b.max);
+    }
+  }
+  [[nodiscard]] bool touches(const Box3& box) const {
+    return !m_changed.empty() && meets(box, m_all) &&
+           std::any_of(m_changed.begin(), m_changed.end(), [&](const Box3& b) { return meets(box, b); });
+  }
+
+ private:
+  [[nodiscard]] bool meets(const Box3& a, const Box3& b) const {
+    return (a.min.array() <= b.max.array() + m_eps).all() && (b.min.array() <= a.max.array() + m_eps).all();
+  }
+  const std::vector<Box3>& m_changed;
+  double m_eps;
+  Box3 m_all;
+};
+
 }  // namespace
 
 Vec3 HandleSpec::position(const Vec3& X, double t) const {
@@ -117,23 +143,85 @@ ObjectModel ObjectModel::refined(const std::vector<int>& leaves) const {
   return m;
 }
 
+ObjectModel ObjectModel::refined_where(const std::function<bool(const Cell&)>& split, int* refined) const {
+  return refine_impl(split, nullptr, {}, refined);
+}
+
+ObjectModel ObjectModel::refined_with_material(const std::function<bool(const Cell&)>& split,
+                                               std::shared_ptr<const MaterialSource> material,
+                                               const std::vector<Box3>& changed, int* refined) const {
+  if (!material) throw std::invalid_argument("ObjectModel::refined_with_material: no material");
+  return refine_impl(split, std::move(material), changed, refined);
+}
+
+ObjectModel ObjectModel::refine_impl(const std::function<bool(const Cell&)>& split,
+                                     std::shared_ptr<const MaterialSource> material,
+                                     const std::vector<Box3>& changed, int* refined) const {
+  const bool cut = material != nullptr;
+  const ChangedRegion region(changed, 1e-9 * m_root.size);
+  // Depth-first below each split leaf, children in Morton order, so the cells come out sorted. A cell that is split
+  // is measured in the old material (it exists when it holds material before the cut), and an empty one goes with
+  // its subtree. A final leaf that the cut touches is measured in the new material only: kept when it holds
+  // material after the cut, which implies that it held some before (occupancy sums only shrink when tets go).
+  std::vector<OccupiedCell> cells;
+  std::vector<Cell> touched;
+  cells.reserve(m_tree.leaves().size() + 64);
+  int count = 0;
+  std::vector<Cell> stack;
+  auto final_leaf = [&](const Cell& c, double occ_before) {
+    const Box3 box = m_root.cell_box(c);
+    if (cut && region.touches(box)) {
+      touched.push_back(c);
+      const double occ = material->occupancy(box);
+      if (occ >= kEmptyOccupancy) cells.push_back({c, occ});
+      return;
+    }
+    if (occ_before < 0.0) occ_before = m_material->occupancy(box);
+    if (occ_before >= kEmptyOccupancy) cells.push_back({c, occ_before});
+  };
+  for (int i = 0; i < num_elements(); ++i) {
+    const Cell& c = m_tree.leaf(i);
+    if (c.level >= m_max_level || !split(c)) {
+      final_leaf(c, m_occupancy[std::size_t(i)]);
+      continue;
+    }
+    ++count;
+    stack.clear();
+    for (int k = 7; k >= 0; --k) stack.push_back(c.child(k));
+    while (!stack.empty()) {
+      const Cell ch = stack.back();
+      stack.pop_back();
+      if (ch.level >= m_max_level || !split(ch)) {
+        final_leaf(ch, -1.0);
+        continue;
+      }
+      if (m_material->occupancy(m_root.cell_box(ch)) < kEmptyOccupancy) continue;
+      ++count;
+      for (int k = 7; k >= 0; --k) stack.push_back(ch.child(k));
+    }
+  }
+  if (refined) *refined = count;
+  if (!cut && count == 0) return *this;
+  if (cells.empty()) throw std::invalid_argument("ObjectModel::with_material: no material is left in the octree");
+
+  ObjectModel m = next_revision(cut ? std::move(material) : m_material);
+  m.set_leaves(std::move(cells));
+  m.finish(this, touched);
+  return m;
+}
+
 ObjectModel ObjectModel::with_material(std::shared_ptr<const MaterialSource> material,
                                        const std::vector<Box3>& changed) const {
   if (!material) throw std::invalid_argument("ObjectModel::with_material: no material");
+  // This model's occupancy and DOFs already follow its own material.
+  if (material == m_material) {
+    ObjectModel m = *this;
+    m.m_revision = m_revision + 1;
+    return m;
+  }
   // A leaf is touched when its closed box meets a changed box (grown by a round-off margin), so that a change
   // that only reaches a leaf's face still redoes the connectivity across that face.
-  const double eps = 1e-9 * m_root.size;
-  Box3 all;  // bounding box of the changed boxes, for a quick reject
-  if (!changed.empty()) {
-    all = changed.front();
-    for (const Box3& b : changed) {
-      all.min = all.min.cwiseMin(b.min);
-      all.max = all.max.cwiseMax(b.max);
-    }
-  }
-  auto meets = [eps](const Box3& a, const Box3& b) {
-    return (a.min.array() <= b.max.array() + eps).all() && (b.min.array() <= a.max.array() + eps).all();
-  };
+  const ChangedRegion region(changed, 1e-9 * m_root.size);
 
   // Touched leaves are measured anew and dropped when empty; every other leaf keeps its occupancy.
   std::vector<OccupiedCell> cells;
@@ -142,9 +230,7 @@ ObjectModel ObjectModel::with_material(std::shared_ptr<const MaterialSource> mat
   for (int i = 0; i < num_elements(); ++i) {
     const Cell& c = m_tree.leaf(i);
     const Box3 box = m_root.cell_box(c);
-    const bool hit = !changed.empty() && meets(box, all) &&
-                     std::any_of(changed.begin(), changed.end(), [&](const Box3& b) { return meets(box, b); });
-    if (!hit) {
+    if (!region.touches(box)) {
       cells.push_back({c, m_occupancy[std::size_t(i)]});
       continue;
     }

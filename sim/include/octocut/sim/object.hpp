@@ -4,6 +4,7 @@
 // SimState.
 #include <array>
 #include <cstddef>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -74,12 +75,34 @@ class ObjectModel {
   /// A new revision in which each listed leaf (by index) is replaced by its non-empty children.
   [[nodiscard]] ObjectModel refined(const std::vector<int>& leaves) const;
 
+  /// Refinement over several levels in one new revision: every leaf for which `split(leaf)` holds is replaced by its
+  /// non-empty children, each non-empty child for which `split(child)` holds by its own non-empty children, and so
+  /// on, never below max_level(). `split` must be a pure function of the cell (it may also be asked about children
+  /// that turn out empty). The result equals repeated refined() calls, each on the leaves for which `split` holds,
+  /// until none is left; the DOF map, masses and handles are built once. `refined`, when given, receives the number
+  /// of leaves refined (what the repeated calls would refine in all). When no leaf is split the result is a copy of
+  /// this model, revision included.
+  [[nodiscard]] ObjectModel refined_where(const std::function<bool(const Cell&)>& split,
+                                          int* refined = nullptr) const;
+
+  /// refined_where(split) followed by with_material(material, changed), as one new revision (one above this
+  /// model's): the same leaves, occupancy and DOF map, bit for bit. A new leaf that the changed boxes touch and
+  /// that is not split further is measured once, in the new material (a leaf empty before the cut is empty after
+  /// it, so the old measurement decides nothing), and the DOFs are updated once. `material` must hold material
+  /// nowhere this model's material holds none (a cut only removes: MaterialGraph::without), and `changed` must
+  /// cover every region where the two differ, as for with_material. Throws as with_material does.
+  [[nodiscard]] ObjectModel refined_with_material(const std::function<bool(const Cell&)>& split,
+                                                  std::shared_ptr<const MaterialSource> material,
+                                                  const std::vector<Box3>& changed, int* refined = nullptr) const;
+
   /// A new revision with the same leaves and a new material (e.g. M after a cut removed tets), for cutting stage 4
   /// (SPEC §4). `changed` lists rest-space boxes, m, that cover every region where the material changed (their
   /// union must hold each removed tet). Only leaves whose closed box meets one of them may change: their occupancy
   /// is measured anew from `material`, those below kEmptyOccupancy are dropped, and the DOFs are rebuilt locally
   /// around them (update_dof_map), so nodes split where the material no longer connects. Every other leaf keeps
-  /// its occupancy. The DOF map equals build_dof_map(tree(), root(), *material) of the result. Throws
+  /// its occupancy. The DOF map equals build_dof_map(tree(), root(), *material) of the result. With this model's
+  /// own material nothing changes (its occupancy and DOFs already follow it): the result is a copy with the next
+  /// revision number, as after refined_with_material. Throws
   /// std::invalid_argument for a null material or when no leaf would hold material. `*this` is left untouched.
   [[nodiscard]] ObjectModel with_material(std::shared_ptr<const MaterialSource> material,
                                           const std::vector<Box3>& changed) const;
@@ -131,6 +154,10 @@ class ObjectModel {
   // An empty model that carries this one's root, parameters, handles and unit stiffness, with the given material
   // and the next revision number.
   [[nodiscard]] ObjectModel next_revision(std::shared_ptr<const MaterialSource> material) const;
+  // refined_where and refined_with_material: `material` null keeps this model's material.
+  [[nodiscard]] ObjectModel refine_impl(const std::function<bool(const Cell&)>& split,
+                                        std::shared_ptr<const MaterialSource> material,
+                                        const std::vector<Box3>& changed, int* refined) const;
   // Sets the tree and the occupancy (sorted into Morton order together).
   void set_leaves(std::vector<OccupiedCell> cells);
   // Derived data of the leaves: geometry, stiffness scale, DOFs, masses and handles. With a previous revision the

@@ -554,6 +554,14 @@ SurfaceEmbedding::SurfaceEmbedding(const ObjectModel& model, std::vector<Vec3> r
   embed(model, {});
   compose(model.dofs(), {}, {});
   m_last_reembedded = num_vertices();
+  // Room for the first cuts, written once here, so that the first update() neither moves the per-vertex arrays
+  // nor takes its scratch CSR's pages from the system (a cut adds a few hundred vertices at most).
+  const std::size_t room = m_rest.size() + m_rest.size() / 8;
+  m_rest.reserve(room);
+  m_embedding.reserve(room);
+  m_next_begin.assign(room + 1, 0);
+  m_next_dof.assign(m_dof.size() + m_dof.size() / 8, 0);
+  m_next_weight.assign(m_next_dof.size(), 0.0);
 }
 
 std::span<const ZEntry> SurfaceEmbedding::vertices_in_leaf(int leaf) const {

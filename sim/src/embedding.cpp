@@ -1,6 +1,7 @@
 #include "octocut/sim/embedding.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <numeric>
@@ -80,9 +81,15 @@ std::vector<int> match_leaves(const Octree& old_tree, const Octree& tree, std::v
 class NearestLeafGrid {
  public:
   NearestLeafGrid(const Octree& tree, const RootGeometry& root) : m_tree(tree), m_root(root) {
-    // About two leaves per bucket, at most 128^3 buckets; G is a power of two so buckets align with cells.
+    // About two buckets per leaf inside the material (G^3 f <= 2 n, f the fraction of the root the n leaves fill),
+    // so that a search near the material scans few leaves however little of the root cube the object fills; at
+    // most 64 buckets per leaf and 128^3 buckets in all. G is a power of two so buckets align with cells.
+    double fill = 0.0;
+    for (const Cell& c : tree.leaves()) fill += std::ldexp(1.0, -3 * c.level);
+    const double n = double(tree.size());
+    const double max_buckets = std::min(2.0 * n / std::max(fill, 1e-300), 64.0 * n);
     m_log_g = 0;
-    while (m_log_g < 7 && (std::size_t(1) << (3 * (m_log_g + 1))) <= std::size_t(tree.size()) / 2) ++m_log_g;
+    while (m_log_g < 7 && std::ldexp(1.0, 3 * (m_log_g + 1)) <= max_buckets) ++m_log_g;
     m_g = 1 << m_log_g;
     const int shift = kMaxDepth - m_log_g;
     // Bucket range of each leaf, then a CSR fill in leaf order (so each bucket lists leaves ascending).
@@ -127,9 +134,20 @@ class NearestLeafGrid {
     double best = std::numeric_limits<double>::infinity();
     int best_leaf = -1;
     for (int r = 0; r < m_g; ++r) {
-      // Stop once no unvisited bucket can hold a leaf at least as near (with a margin for rounding).
-      const double bound = double(r - 1) * edge;
-      if (r >= 1 && bound > 0.0 && bound * bound > best * (1.0 + 1e-9)) break;
+      // Stop once no unvisited bucket can hold a leaf at least as near (with margins for rounding): the buckets not
+      // yet visited lie outside the block of rings 0 .. r - 1, so they are at least as far from p as that block's
+      // faces that do not lie on the grid's boundary; stop too when every face does (nothing is left).
+      if (r >= 1) {
+        double bound = std::numeric_limits<double>::infinity();
+        const int c[3] = {cx, cy, cz};
+        for (int d = 0; d < 3; ++d) {
+          if (c[d] - r + 1 > 0) bound = std::min(bound, p[d] - (m_root.min[d] + double(c[d] - r + 1) * edge));
+          if (c[d] + r < m_g) bound = std::min(bound, m_root.min[d] + double(c[d] + r) * edge - p[d]);
+        }
+        if (bound == std::numeric_limits<double>::infinity()) break;
+        bound -= 1e-9 * edge;
+        if (bound > 0.0 && bound * bound > best * (1.0 + 1e-9)) break;
+      }
       for (int z = std::max(cz - r, 0); z <= std::min(cz + r, m_g - 1); ++z)
         for (int y = std::max(cy - r, 0); y <= std::min(cy + r, m_g - 1); ++y)
           for (int x = std::max(cx - r, 0); x <= std::min(cx + r, m_g - 1); ++x) {
@@ -260,6 +278,83 @@ std::vector<int> fallback_anchors(std::span<const VertexEmbedding> embedding, st
     frontier.swap(next);
   }
   return anchor;
+}
+
+// Appends the composed row of e to (dof, weight): vertex = sum_k w_k (P x)_(8 leaf + k), the entries of one DOF
+// summed in slot order, DOFs ascending, zero sums dropped. `acc` is scratch.
+void compose_row(const DofMap& P, const VertexEmbedding& e, std::vector<std::pair<int, double>>& acc,
+                 std::vector<int>& dof, std::vector<double>& weight) {
+  acc.clear();
+  for (int k = 0; k < 8; ++k) {
+    const double w = e.weights[std::size_t(k)];
+    if (w == 0.0) continue;
+    const std::size_t s = 8 * std::size_t(e.leaf) + std::size_t(k);
+    for (int i = P.slot_begin[s]; i < P.slot_begin[s + 1]; ++i)
+      acc.emplace_back(P.slot_dof[std::size_t(i)], w * P.slot_weight[std::size_t(i)]);
+  }
+  // Group by DOF, keeping the slot order within a DOF (a stable insertion sort: the lists are short), and sum.
+  for (std::size_t i = 1; i < acc.size(); ++i) {
+    const auto item = acc[i];
+    std::size_t j = i;
+    for (; j > 0 && acc[j - 1].first > item.first; --j) acc[j] = acc[j - 1];
+    acc[j] = item;
+  }
+  for (std::size_t i = 0; i < acc.size();) {
+    double w = 0.0;
+    std::size_t j = i;
+    for (; j < acc.size() && acc[j].first == acc[i].first; ++j) w += acc[j].second;
+    if (w != 0.0) {
+      dof.push_back(acc[i].first);
+      weight.push_back(w);
+    }
+    i = j;
+  }
+}
+
+// Old-to-new DOF map by logical node: the r-th DOF of a node in the old DOF list goes to the r-th DOF of the same
+// node in the new one, -1 where the new list has none (|old|). `old_node`, `new_node`: node key of each DOF. DOF maps
+// number their DOFs by node key, then by component, so the map is strictly increasing on the DOFs it maps; should
+// either list not be sorted by node, nothing is mapped (all -1), which only costs speed.
+std::vector<int> match_dofs(std::span<const std::uint64_t> old_node, std::span<const std::uint64_t> new_node) {
+  std::vector<int> map(old_node.size(), -1);
+  if (!std::is_sorted(old_node.begin(), old_node.end()) || !std::is_sorted(new_node.begin(), new_node.end()))
+    return map;
+  std::size_t i = 0, j = 0;
+  while (i < old_node.size() && j < new_node.size()) {
+    if (old_node[i] < new_node[j]) {
+      ++i;
+    } else if (new_node[j] < old_node[i]) {
+      ++j;
+    } else {
+      // The DOFs of one node on both sides, paired in order.
+      const std::uint64_t key = old_node[i];
+      for (; i < old_node.size() && j < new_node.size() && old_node[i] == key && new_node[j] == key; ++i, ++j)
+        map[i] = int(j);
+      while (i < old_node.size() && old_node[i] == key) ++i;
+      while (j < new_node.size() && new_node[j] == key) ++j;
+    }
+  }
+  return map;
+}
+
+// True when the 8 rows of P for old leaf i (old_begin, old_dof, old_weight: the CSR of the old P) and for new leaf j
+// hold the same entries in the same order, every old DOF mapped by dof_map onto the new one and the weights equal
+// bit for bit. A vertex bound to the leaf with the same weights then composes to its old row, renumbered.
+bool same_leaf_rows(std::span<const int> old_begin, std::span<const int> old_dof, std::span<const double> old_weight,
+                    int i, const DofMap& P, int j, std::span<const int> dof_map) {
+  const std::size_t a0 = std::size_t(old_begin[8 * std::size_t(i)]), a1 = std::size_t(old_begin[8 * std::size_t(i) + 8]);
+  const std::size_t b0 = std::size_t(P.slot_begin[8 * std::size_t(j)]);
+  if (a1 - a0 != std::size_t(P.slot_begin[8 * std::size_t(j) + 8]) - b0) return false;
+  for (int k = 1; k < 8; ++k)
+    if (std::size_t(old_begin[8 * std::size_t(i) + std::size_t(k)]) - a0 !=
+        std::size_t(P.slot_begin[8 * std::size_t(j) + std::size_t(k)]) - b0)
+      return false;
+  for (std::size_t n = 0; n < a1 - a0; ++n) {
+    if (dof_map[std::size_t(old_dof[a0 + n])] != P.slot_dof[b0 + n]) return false;
+    if (std::bit_cast<std::uint64_t>(old_weight[a0 + n]) != std::bit_cast<std::uint64_t>(P.slot_weight[b0 + n]))
+      return false;
+  }
+  return true;
 }
 
 // Fallback embedding of p in `leaf`: extrapolated trilinear weights, projected into the allowed range.
@@ -456,8 +551,17 @@ SurfaceEmbedding::SurfaceEmbedding(const ObjectModel& model, std::vector<Vec3> r
   m_zcurve = ZCurveList(m_root, m_rest);
   m_embedding.assign(m_rest.size(), VertexEmbedding{});
   build_adjacency();
-  embed_and_compose(model, {});
+  embed(model, {});
+  compose(model.dofs(), {}, {});
   m_last_reembedded = num_vertices();
+  // Room for the first cuts, written once here, so that the first update() neither moves the per-vertex arrays
+  // nor takes its scratch CSR's pages from the system (a cut adds a few hundred vertices at most).
+  const std::size_t room = m_rest.size() + m_rest.size() / 8;
+  m_rest.reserve(room);
+  m_embedding.reserve(room);
+  m_next_begin.assign(room + 1, 0);
+  m_next_dof.assign(m_dof.size() + m_dof.size() / 8, 0);
+  m_next_weight.assign(m_next_dof.size(), 0.0);
 }
 
 std::span<const ZEntry> SurfaceEmbedding::vertices_in_leaf(int leaf) const {
@@ -472,6 +576,12 @@ int SurfaceEmbedding::num_fallback() const {
 
 void SurfaceEmbedding::check_triangles(const std::vector<std::array<int32_t, 3>>& triangles,
                                        std::size_t num_vertices) const {
+  // One unsigned comparison per corner (negative indices wrap above any size); the search for the culprit only on
+  // failure.
+  std::uint32_t largest = 0;
+  for (const auto& t : triangles)
+    largest = std::max({largest, std::uint32_t(t[0]), std::uint32_t(t[1]), std::uint32_t(t[2])});
+  if (triangles.empty() || std::size_t(largest) < num_vertices) return;
   for (std::size_t t = 0; t < triangles.size(); ++t)
     for (int k = 0; k < 3; ++k) {
       const int32_t v = triangles[t][std::size_t(k)];
@@ -481,7 +591,7 @@ void SurfaceEmbedding::check_triangles(const std::vector<std::array<int32_t, 3>>
     }
 }
 
-void SurfaceEmbedding::embed_and_compose(const ObjectModel& model, const std::vector<char>& redo) {
+void SurfaceEmbedding::embed(const ObjectModel& model, const std::vector<char>& redo) {
   const std::size_t nv = m_rest.size();
   // Re-embed the flagged vertices (all of them when no flags are given); those in no leaf are collected.
   if (m_tree.size() == 0) throw std::invalid_argument("SurfaceEmbedding: the model has no leaf");
@@ -514,45 +624,50 @@ void SurfaceEmbedding::embed_and_compose(const ObjectModel& model, const std::ve
       m_embedding[v] = fallback_embedding(m_tree, m_root, leaf, m_rest[v]);
     }
   }
+}
 
-  // Compose through P: vertex v = sum_k w_k (P x)_(8 leaf + k), entries of one DOF summed in slot order.
-  const DofMap& P = model.dofs();
-  m_begin.assign(nv + 1, 0);
-  m_dof.clear();
-  m_weight.clear();
-  m_dof.reserve(nv * 8);
-  m_weight.reserve(nv * 8);
+void SurfaceEmbedding::compose(const DofMap& P, std::span<const int> reuse_from, std::span<const int> dof_map) {
+  // Into the scratch CSR, then swapped in: the old rows are read while the new ones are written.
+  const std::size_t nv = m_rest.size();
+  m_next_begin.resize(nv + 1);
+  m_next_begin[0] = 0;
+  m_next_dof.clear();
+  m_next_weight.clear();
+  m_next_dof.reserve(m_dof.size() + 64);
+  m_next_weight.reserve(m_dof.size() + 64);
   std::vector<std::pair<int, double>> acc;
-  for (std::size_t v = 0; v < nv; ++v) {
-    const VertexEmbedding& e = m_embedding[v];
-    acc.clear();
-    for (int k = 0; k < 8; ++k) {
-      const double w = e.weights[std::size_t(k)];
-      if (w == 0.0) continue;
-      const std::size_t s = 8 * std::size_t(e.leaf) + std::size_t(k);
-      for (int i = P.slot_begin[s]; i < P.slot_begin[s + 1]; ++i)
-        acc.emplace_back(P.slot_dof[std::size_t(i)], w * P.slot_weight[std::size_t(i)]);
+  for (std::size_t v = 0; v < nv;) {
+    const int from = reuse_from.empty() ? -1 : reuse_from[v];
+    if (from < 0) {
+      compose_row(P, m_embedding[v], acc, m_next_dof, m_next_weight);
+      m_next_begin[++v] = int(m_next_dof.size());
+      continue;
     }
-    // Group by DOF, keeping the slot order within a DOF (a stable insertion sort: the lists are short), and sum.
-    for (std::size_t i = 1; i < acc.size(); ++i) {
-      const auto item = acc[i];
-      std::size_t j = i;
-      for (; j > 0 && acc[j - 1].first > item.first; --j) acc[j] = acc[j - 1];
-      acc[j] = item;
-    }
-    for (std::size_t i = 0; i < acc.size();) {
-      double w = 0.0;
-      std::size_t j = i;
-      for (; j < acc.size() && acc[j].first == acc[i].first; ++j) w += acc[j].second;
-      if (w != 0.0) {
-        m_dof.push_back(acc[i].first);
-        m_weight.push_back(w);
-      }
-      i = j;
-    }
-    m_begin[v + 1] = int(m_dof.size());
+    // A run of vertices that keep consecutive old rows (the same leaf rows up to the DOF numbering, which keeps
+    // the DOF order): the old entries in one block, DOFs renumbered.
+    std::size_t end = v + 1;
+    while (end < nv && reuse_from[end] == from + int(end - v)) ++end;
+    const std::size_t a = std::size_t(m_begin[std::size_t(from)]);
+    const std::size_t b = std::size_t(m_begin[std::size_t(from) + (end - v)]);
+    const std::size_t out = m_next_dof.size();
+    m_next_dof.resize(out + (b - a));
+    m_next_weight.insert(m_next_weight.end(), m_weight.begin() + std::ptrdiff_t(a), m_weight.begin() + std::ptrdiff_t(b));
+    int* dof = m_next_dof.data() + out;
+    for (std::size_t i = a; i < b; ++i) dof[i - a] = dof_map[std::size_t(m_dof[i])];
+    const int shift = int(out) - int(a);
+    for (std::size_t u = v; u < end; ++u) m_next_begin[u + 1] = m_begin[std::size_t(from) + (u - v) + 1] + shift;
+    v = end;
   }
-  m_num_dofs = model.num_dofs();
+  m_begin.swap(m_next_begin);
+  m_dof.swap(m_next_dof);
+  m_weight.swap(m_next_weight);
+
+  // Keep the rows of P and the DOF nodes for the next update().
+  m_num_dofs = P.num_dofs;
+  m_slot_begin = P.slot_begin;
+  m_slot_dof = P.slot_dof;
+  m_slot_weight = P.slot_weight;
+  m_dof_node = P.dof_node;
 }
 
 void SurfaceEmbedding::build_adjacency() {
@@ -638,51 +753,72 @@ std::vector<int> SurfaceEmbedding::update(const ObjectModel& new_model, const Su
   const std::vector<int> map = m_zcurve.update(edit.removed_vertices, edit.inserted_rest);
 
   // Leaves kept from the old tree keep their vertices' weights, renumbered (nothing to match when the tree is the same).
-  const bool same_tree = new_model.tree().leaves() == m_tree.leaves();
+  const Octree& tree = new_model.tree();
+  const DofMap& P = new_model.dofs();
+  const bool same_tree = tree.leaves() == m_tree.leaves();
   std::vector<char> kept_new;
   std::vector<int> old_to_new;
   if (same_tree) {
     old_to_new.resize(std::size_t(m_tree.size()));
     std::iota(old_to_new.begin(), old_to_new.end(), 0);
   } else {
-    old_to_new = match_leaves(m_tree, new_model.tree(), kept_new);
+    old_to_new = match_leaves(m_tree, tree, kept_new);
   }
-  std::vector<Vec3> rest(nv_new);
-  std::vector<VertexEmbedding> embedding(nv_new);
+
+  // Kept leaves whose 8 rows of P are the same up to the renumbering of the DOFs (most of them: a cut rebuilds the
+  // DOFs only around the changed region); their regularly bound vertices keep their composed rows.
+  const std::vector<int> dof_map = match_dofs(m_dof_node, P.dof_node);
+  std::vector<char> same_rows(std::size_t(tree.size()), 0);
+  for (int i = 0; i < m_tree.size(); ++i) {
+    const int j = old_to_new[std::size_t(i)];
+    if (j >= 0) same_rows[std::size_t(j)] = same_leaf_rows(m_slot_begin, m_slot_dof, m_slot_weight, i, P, j, dof_map);
+  }
+
+  // Kept vertices move down to their new index in place (the map is increasing), with their leaf renumbered; the
+  // fallback ones and those whose leaf is gone are flagged for re-embedding. reuse_from: the old vertex whose
+  // composed row a vertex keeps, or -1.
+  const std::size_t kept = nv_new - edit.inserted_rest.size();
   std::vector<char> redo(nv_new, 0);
+  std::vector<int> reuse_from(nv_new, -1);
   for (std::size_t v = 0; v < map.size(); ++v) {
-    const int nvx = map[v];
-    if (nvx < 0) continue;
-    rest[std::size_t(nvx)] = m_rest[v];
+    const std::size_t k = std::size_t(map[v]);
+    if (map[v] < 0) continue;
+    m_rest[k] = m_rest[v];
     VertexEmbedding e = m_embedding[v];
     const int leaf = old_to_new[std::size_t(e.leaf)];
     if (e.fallback || leaf < 0) {
-      redo[std::size_t(nvx)] = 1;
+      redo[k] = 1;
     } else {
       e.leaf = leaf;
-      embedding[std::size_t(nvx)] = e;
+      if (same_rows[std::size_t(leaf)]) reuse_from[k] = int(v);
     }
+    m_embedding[k] = e;
   }
-  const std::size_t kept = nv_new - edit.inserted_rest.size();
+  m_rest.resize(nv_new);
+  m_embedding.resize(nv_new);
   for (std::size_t i = 0; i < edit.inserted_rest.size(); ++i) {
-    rest[kept + i] = edit.inserted_rest[i];
+    m_rest[kept + i] = edit.inserted_rest[i];
     redo[kept + i] = 1;
   }
 
   // Vertices of new or changed leaves: two binary searches per leaf on the Z-curve list.
-  for (int j = 0; j < (same_tree ? 0 : new_model.tree().size()); ++j)
-    if (!kept_new[std::size_t(j)])
-      for (const ZEntry& z : m_zcurve.in_cell(new_model.tree().leaf(j))) redo[std::size_t(z.vertex)] = 1;
-  for (const int j : edit.changed_leaves)
-    for (const ZEntry& z : m_zcurve.in_cell(new_model.tree().leaf(j))) redo[std::size_t(z.vertex)] = 1;
+  auto flag_leaf = [&](int j) {
+    for (const ZEntry& z : m_zcurve.in_cell(tree.leaf(j))) {
+      redo[std::size_t(z.vertex)] = 1;
+      reuse_from[std::size_t(z.vertex)] = -1;
+    }
+  };
+  for (int j = 0; j < (same_tree ? 0 : tree.size()); ++j)
+    if (!kept_new[std::size_t(j)]) flag_leaf(j);
+  for (const int j : edit.changed_leaves) flag_leaf(j);
 
-  // Swap in the new surface and tree, then re-embed the flagged vertices and recompose through the new P.
-  m_rest = std::move(rest);
-  m_embedding = std::move(embedding);
+  // Swap in the new surface and tree, re-embed the flagged vertices, and compose: kept rows renumbered, the others
+  // anew through the new P.
   m_triangles = edit.triangles;
-  if (!same_tree) m_tree = new_model.tree();
+  if (!same_tree) m_tree = tree;
   build_adjacency();
-  embed_and_compose(new_model, redo);
+  embed(new_model, redo);
+  compose(P, reuse_from, dof_map);
   m_last_reembedded = int(std::count(redo.begin(), redo.end(), char(1)));
   return map;
 }

@@ -666,6 +666,47 @@ TEST(SurfaceEmbedding, RebindAfterRefinementEqualsRebuild) {
   EXPECT_LT(e.last_reembedded(), e.num_vertices());
 }
 
+// Revisions from with_material (cutting stage 4). First a slit 2 um wide on the leaf face x = 7 mm: the same leaves,
+// but the nodes on that face split, so the DOFs after them are renumbered and the leaves beside the slit get new
+// rows of P. Then the slab y in [7, 9] mm of the left part goes: its leaves and the nodes inside it go too. Each
+// update with the same surface must equal a fresh embedding, for the vertices whose rows it keeps (renumbered) and
+// for those it composes anew.
+TEST(SurfaceEmbedding, UpdateAfterWithMaterialEqualsRebuild) {
+  OctreeSpec spec;
+  spec.root = kRoot;
+  spec.base_level = 4;
+  spec.max_level = 6;
+  const ObjectModel before = ObjectModel::build(
+      spec, std::make_shared<BoxSetMaterial>(std::vector<Box3>{{Vec3(0.002, 0.002, 0.002), Vec3(0.014, 0.014, 0.014)}}),
+      {}, {});
+  const ObjectModel slit = before.with_material(
+      std::make_shared<BoxSetMaterial>(std::vector<Box3>{{Vec3(0.002, 0.002, 0.002), Vec3(0.006999, 0.014, 0.014)},
+                                                         {Vec3(0.007001, 0.002, 0.002), Vec3(0.014, 0.014, 0.014)}}),
+      {{Vec3(0.0065, 0.0015, 0.0015), Vec3(0.0075, 0.0145, 0.0145)}});
+  ASSERT_EQ(slit.tree().leaves(), before.tree().leaves());
+  ASSERT_GT(slit.num_dofs(), before.num_dofs());
+  const TriMesh s = ellipsoid(kCentre, kRadii, 60, 30);
+  SurfaceEmbedding e(before, s.vertices, s.triangles);
+  SurfaceEdit edit;
+  edit.triangles = s.triangles;
+  e.update(slit, edit);
+  EXPECT_EQ(e.last_reembedded(), 0);
+  expect_same(e, SurfaceEmbedding(slit, s.vertices, s.triangles));
+
+  const ObjectModel gap = slit.with_material(
+      std::make_shared<BoxSetMaterial>(std::vector<Box3>{{Vec3(0.002, 0.002, 0.002), Vec3(0.006999, 0.007, 0.014)},
+                                                         {Vec3(0.002, 0.009, 0.002), Vec3(0.006999, 0.014, 0.014)},
+                                                         {Vec3(0.007001, 0.002, 0.002), Vec3(0.014, 0.014, 0.014)}}),
+      {{Vec3(0.0015, 0.0065, 0.0015), Vec3(0.0075, 0.0095, 0.0145)}});
+  ASSERT_LT(gap.num_elements(), slit.num_elements());
+  ASSERT_LT(gap.num_dofs(), slit.num_dofs());
+  e.update(gap, edit);
+  EXPECT_LT(e.last_reembedded(), e.num_vertices() / 2);
+  const SurfaceEmbedding fresh(gap, s.vertices, s.triangles);
+  expect_same(e, fresh);
+  EXPECT_GT(fresh.num_fallback(), 0);
+}
+
 TEST(SurfaceEmbedding, ThreadCountDoesNotChangeResults) {
   const ObjectModel m = hanging_model();
   const TriMesh s = ellipsoid(kCentre, kRadii, 160, 80);  // ~12.6k vertices: several parallel chunks

@@ -142,7 +142,8 @@ class SurfaceEmbedding {
   /// Applies a cut: removes and inserts vertices (ZCurveList::update), replaces the triangles, re-embeds only the
   /// new vertices, the vertices of leaves that are new in `new_model` or listed in edit.changed_leaves, the vertices
   /// whose old leaf is gone, and all fallback vertices (their anchors and components depend on the new surface and
-  /// the new DOFs); then recomposes every vertex through the new P. The result equals a fresh SurfaceEmbedding of
+  /// the new DOFs). A vertex that keeps its leaf and weights keeps its composed row, DOFs renumbered, when the 8
+  /// rows of P of its leaf are the same up to that renumbering; the others are composed anew through the new P. The result equals a fresh SurfaceEmbedding of
   /// the new surface in `new_model`. Returns the old-to-new vertex map (-1 for a removed vertex). Throws
   /// std::invalid_argument for bad indices or a model with another root cube or no leaf; the embedding is
   /// unchanged then.
@@ -156,9 +157,13 @@ class SurfaceEmbedding {
   [[nodiscard]] int last_reembedded() const { return m_last_reembedded; }
 
  private:
-  // Re-embeds the vertices flagged in `redo` (all when redo is empty) in m_tree and recomposes all through P. Every
-  // unflagged vertex must be regularly bound, and the adjacency must be built for m_triangles (fallback anchors).
-  void embed_and_compose(const ObjectModel& model, const std::vector<char>& redo);
+  // Re-embeds the vertices flagged in `redo` (|V|; all when redo is empty) in m_tree. Every unflagged vertex must be
+  // regularly bound, and the adjacency must be built for m_triangles (fallback anchors).
+  void embed(const ObjectModel& model, const std::vector<char>& redo);
+  // Composes every vertex through P into the CSR and keeps P's rows for the next update(). Vertex v with
+  // reuse_from[v] >= 0 takes the current row of that (old) vertex with its DOFs renumbered by dof_map (old num_dofs),
+  // which the caller has shown to equal the row composed anew; empty reuse_from composes all anew.
+  void compose(const DofMap& P, std::span<const int> reuse_from, std::span<const int> dof_map);
   void build_adjacency();
   void check_triangles(const std::vector<std::array<int32_t, 3>>& triangles, std::size_t num_vertices) const;
 
@@ -174,6 +179,16 @@ class SurfaceEmbedding {
   std::vector<int> m_tri_begin;                    ///< vertex-to-triangle CSR row starts (|V| + 1)
   std::vector<int> m_tri;                          ///< incident triangles of each vertex, ascending (3 |F|)
   int m_num_dofs = 0;                              ///< DOFs of the bound model
+  // The bound model's P and DOF nodes, kept so that update() can tell the leaves whose rows of P a new revision
+  // leaves unchanged (up to DOF numbering) and keep their vertices' composed rows.
+  std::vector<int> m_slot_begin;                   ///< CSR row starts of P (8 num_leaves + 1)
+  std::vector<int> m_slot_dof;                     ///< DOF of each entry of P (nnz(P))
+  std::vector<double> m_slot_weight;               ///< weight of each entry of P, dimensionless (nnz(P))
+  std::vector<std::uint64_t> m_dof_node;           ///< node_key() of each DOF's node (num_dofs)
+  // Scratch of compose(): the next CSR, swapped with the current one, so that an update allocates little.
+  std::vector<int> m_next_begin;                   ///< (|V| + 1)
+  std::vector<int> m_next_dof;                     ///< (nnz)
+  std::vector<double> m_next_weight;               ///< (nnz)
   int m_last_reembedded = 0;
 };
 

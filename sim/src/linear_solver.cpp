@@ -5,6 +5,7 @@
 #include "octocut/sim/parallel.hpp"
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <stdexcept>
 #include <string>
 #include <vector>

@@ -261,9 +261,9 @@ std::string resolve_mesh(const json& value, const std::string& pointer, const st
   return resolved.string();
 }
 
-/// Reads `tools[]`: names unique and not empty, mesh files present, keyframe and cut times strictly increasing,
-/// cuts within [0, duration].
-std::vector<ToolSettings> to_tools(const json& tools, double duration, const std::string& file) {
+/// Reads `tools[]`: names unique and not empty, mesh files present, keyframe and cut times strictly increasing (a
+/// cut after the duration is allowed; the run reports that it never happened).
+std::vector<ToolSettings> to_tools(const json& tools, const std::string& file) {
   std::vector<ToolSettings> out;
   std::set<std::string> names;
   for (std::size_t i = 0; i < tools.size(); ++i) {
@@ -311,7 +311,6 @@ std::vector<ToolSettings> to_tools(const json& tools, double duration, const std
       }
       // A cut after the end of the run is allowed (a run shortened with --set /duration): the report says it never
       // happened.
-      (void)duration;
       entry.cuts.push_back(cut);
     }
     out.push_back(std::move(entry));
@@ -415,7 +414,7 @@ Scene to_scene(const json& document, const std::string& file) {
   }
 
   // Tools and cutting settings.
-  scene.tools = to_tools(document["tools"], scene.duration, file);
+  scene.tools = to_tools(document["tools"], file);
   const json& cutting = document["cutting"];
   scene.cutting.remove_fragments = cutting["remove_fragments"].get<std::string>();
   scene.cutting.fragment_volume = cutting["fragment_volume"].get<double>();

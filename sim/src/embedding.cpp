@@ -181,48 +181,6 @@ class NearestLeafGrid {
   std::vector<int> m_leaf;     ///< leaves overlapping each bucket, ascending (nnz)
 };
 
-// Material components of the elements: two leaves belong to one component when they share a DOF, i.e. when some
-// slot of each reaches that DOF through P (hanging slots included, since a hard binding only links connected
-// leaves). Union-find over the DOFs, the lower root winning; components are numbered 0, 1, ... in the order of
-// their lowest leaf. Returns one component per leaf (num_leaves). Cost: one pass over nnz(P).
-std::vector<int> element_components(const DofMap& P, int num_leaves) {
-  std::vector<int> parent(std::size_t(P.num_dofs));
-  std::iota(parent.begin(), parent.end(), 0);
-  auto find = [&](int d) {
-    while (parent[std::size_t(d)] != d) {
-      parent[std::size_t(d)] = parent[std::size_t(parent[std::size_t(d)])];
-      d = parent[std::size_t(d)];
-    }
-    return d;
-  };
-  // Join every DOF a leaf reaches with the leaf's first one.
-  for (int l = 0; l < num_leaves; ++l) {
-    const int begin = P.slot_begin[8 * std::size_t(l)], end = P.slot_begin[8 * std::size_t(l) + 8];
-    if (begin == end) continue;
-    int root = find(P.slot_dof[std::size_t(begin)]);
-    for (int i = begin + 1; i < end; ++i) {
-      const int r = find(P.slot_dof[std::size_t(i)]);
-      if (r == root) continue;
-      parent[std::size_t(std::max(r, root))] = std::min(r, root);
-      root = std::min(r, root);
-    }
-  }
-  // Number the roots in leaf order; a leaf that reaches no DOF (never, by the invariants of SPEC §2.3) is alone.
-  std::vector<int> label(std::size_t(P.num_dofs), -1), component(std::size_t(num_leaves), -1);
-  int next = 0;
-  for (int l = 0; l < num_leaves; ++l) {
-    const int begin = P.slot_begin[8 * std::size_t(l)], end = P.slot_begin[8 * std::size_t(l) + 8];
-    if (begin == end) {
-      component[std::size_t(l)] = next++;
-      continue;
-    }
-    int& c = label[std::size_t(find(P.slot_dof[std::size_t(begin)]))];
-    if (c < 0) c = next++;
-    component[std::size_t(l)] = c;
-  }
-  return component;
-}
-
 // True when leaves a and b are the same leaf or some slot of each reaches the same DOF through P (then they are in
 // one material component). At most 8 x 8 short rows compared.
 bool leaves_share_dof(const DofMap& P, int a, int b) {
@@ -616,7 +574,10 @@ void SurfaceEmbedding::embed(const ObjectModel& model, const std::vector<char>& 
       if (a >= 0) {
         const int home = m_embedding[std::size_t(a)].leaf;
         if (!leaves_share_dof(model.dofs(), leaf, home)) {
-          if (component.empty()) component = element_components(model.dofs(), m_tree.size());
+          if (component.empty()) {
+            int count = 0;
+            component = element_components(model, count);  // two leaves are one component when they share a DOF
+          }
           const int c = component[std::size_t(home)];
           if (component[std::size_t(leaf)] != c) leaf = grid.nearest(m_rest[v], c, component);
         }

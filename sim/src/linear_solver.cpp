@@ -5,7 +5,6 @@
 #include "octocut/sim/parallel.hpp"
 #include <algorithm>
 #include <cmath>
-#include <cstdlib>
 #include <stdexcept>
 #include <string>
 #include <vector>

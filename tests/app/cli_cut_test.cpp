@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <numbers>
 
+#include "../common/shapes.hpp"
 #include "cli_util.hpp"
 #include "octocut/engine/mesh_io.hpp"
 #include "octocut/sim/primitives.hpp"
@@ -19,25 +20,7 @@ namespace {
 namespace fs = std::filesystem;
 using sim::Vec3;
 
-// A closed, outward n-gon prism around z, in the units the caller chooses.
-sim::TriMesh prism(const Vec3& c, double r, double h, int n) {
-  sim::TriMesh m;
-  for (int s = 0; s < 2; ++s)
-    for (int i = 0; i < n; ++i) {
-      const double a = 2.0 * std::numbers::pi * i / n;
-      m.vertices.push_back(c + Vec3(r * std::cos(a), r * std::sin(a), (s ? 0.5 : -0.5) * h));
-    }
-  m.vertices.push_back(c + Vec3(0, 0, -0.5 * h));
-  m.vertices.push_back(c + Vec3(0, 0, 0.5 * h));
-  for (int i = 0; i < n; ++i) {
-    const int j = (i + 1) % n;
-    m.triangles.push_back({i, j, n + j});
-    m.triangles.push_back({i, n + j, n + i});
-    m.triangles.push_back({2 * n, j, i});
-    m.triangles.push_back({2 * n + 1, n + i, n + j});
-  }
-  return m;
-}
+sim::TriMesh prism(const Vec3& c, double r, double h, int n) { return test::prism_mesh(c, r, h, n); }
 
 struct CutCli : ::testing::Test {
   fs::path dir;

@@ -5,6 +5,7 @@
 
 #include <functional>
 
+#include "../common/kuhn_grid.hpp"
 #include "octocut/sim/material_graph.hpp"
 #include "octocut/sim/object.hpp"
 
@@ -17,28 +18,8 @@ constexpr int kNx = 32, kNy = 32, kNz = 12;
 constexpr double kCube = 1.0 / 32.0;  // m
 
 std::shared_ptr<MaterialGraph> slab(const std::function<bool(int, int, int)>& keep) {
-  TetMesh m;
-  auto id = [](int i, int j, int k) { return int32_t((k * (kNy + 1) + j) * (kNx + 1) + i); };
-  for (int k = 0; k <= kNz; ++k)
-    for (int j = 0; j <= kNy; ++j)
-      for (int i = 0; i <= kNx; ++i) m.vertices.push_back(kCube * Vec3(i, j, k));
-  const int perms[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
-  for (int k = 0; k < kNz; ++k)
-    for (int j = 0; j < kNy; ++j)
-      for (int i = 0; i < kNx; ++i) {
-        if (!keep(i, j, k)) continue;
-        for (const auto& p : perms) {
-          std::array<int, 3> c{i, j, k};
-          std::array<int32_t, 4> t{};
-          t[0] = id(c[0], c[1], c[2]);
-          for (int s = 0; s < 3; ++s) {
-            ++c[std::size_t(p[s])];
-            t[std::size_t(s) + 1] = id(c[0], c[1], c[2]);
-          }
-          m.tets.push_back(t);
-        }
-      }
-  return std::make_shared<MaterialGraph>(std::move(m));
+  return std::make_shared<MaterialGraph>(
+      octocut::test::kuhn_grid(Vec3::Zero(), Vec3::Constant(kCube), {kNx, kNy, kNz}, keep));
 }
 
 // The uncut slab at level 4 (h = 1/16): 16 x 16 x 6 = 1536 elements, with a handle on its x = 0 end.

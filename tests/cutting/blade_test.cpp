@@ -12,6 +12,7 @@
 #include <random>
 
 #include "octocut/cutting/blade.hpp"
+#include "../common/kuhn_grid.hpp"
 #include "../common/shapes.hpp"
 #include "octocut/sim/material_graph.hpp"
 #include "test_meshes.hpp"
@@ -529,43 +530,11 @@ TEST(InscribedRadius, MatchesAnalyticValuesWithinOnePercent) {
 // ---------------------------------------------------------------------------------------------------------------
 // tets_touched and timings
 
-/// A box [lo, hi] cut into n^3 cells of 6 Kuhn tets each (6 n^3 tets), interior vertices jittered.
-sim::TetMesh kuhn_box(const Box3& box, int n, double jitter, unsigned seed) {
-  sim::TetMesh m;
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-jitter, jitter);
-  const Vec3 h = (box.max - box.min) / n;
-  auto id = [&](int i, int j, int k) { return int32_t((k * (n + 1) + j) * (n + 1) + i); };
-  for (int k = 0; k <= n; ++k)
-    for (int j = 0; j <= n; ++j)
-      for (int i = 0; i <= n; ++i) {
-        Vec3 p = box.min + Vec3(i * h.x(), j * h.y(), k * h.z());
-        const std::array<int, 3> g{i, j, k};
-        for (int a = 0; a < 3; ++a)
-          if (g[std::size_t(a)] > 0 && g[std::size_t(a)] < n) p[a] += u(rng) * h[a];
-        m.vertices.push_back(p);
-      }
-  const int perms[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
-  for (int k = 0; k < n; ++k)
-    for (int j = 0; j < n; ++j)
-      for (int i = 0; i < n; ++i)
-        for (const auto& p : perms) {
-          std::array<int, 3> c{i, j, k};
-          std::array<int32_t, 4> t{};
-          t[0] = id(c[0], c[1], c[2]);
-          for (int s = 0; s < 3; ++s) {
-            ++c[std::size_t(p[s])];
-            t[std::size_t(s) + 1] = id(c[0], c[1], c[2]);
-          }
-          m.tets.push_back(t);
-        }
-  return m;
-}
 
 TEST(TetsTouched, BoxBladeMatchesBruteForceTruth) {
   // M: 13^3 x 6 = 13182 tets over a 4 cm cube; the blade: a 3 x 2 x 5 mm box. Truth per tet from the clipped volume
   // and separating axes, as above; every tet must be classified.
-  const sim::MaterialGraph graph(kuhn_box(Box3{Vec3::Zero(), Vec3::Constant(0.04)}, 13, 0.3, 5));
+  const sim::MaterialGraph graph(test::kuhn_box(Box3{Vec3::Zero(), Vec3::Constant(0.04)}, 13, 0.3, 5));
   ASSERT_EQ(graph.num_tets(), 13182);
   const Box3 solid{Vec3(0.0113, 0.0171, 0.0052), Vec3(0.0143, 0.0191, 0.0102)};
   TriMesh mesh = test::grid_cube(2, 1.0);
@@ -628,7 +597,7 @@ TEST(TetsTouched, TimingOfATwoMillimetrePunch) {
     hits_hex = 0;
     for (const Box3& b : boxes) hits_hex += blade.overlaps_hexahedron(box_corners(b));
   });
-  const sim::MaterialGraph graph(kuhn_box(Box3{Vec3::Constant(0.01), Vec3::Constant(0.03)}, 13, 0.3, 7));
+  const sim::MaterialGraph graph(test::kuhn_box(Box3{Vec3::Constant(0.01), Vec3::Constant(0.03)}, 13, 0.3, 7));
   std::size_t touched = 0;
   const double ms_touched = fastest_ms([&] { touched = tets_touched(graph, blade).size(); });
   std::printf("fastest of 20: 1000 overlaps_box %.3f ms (%d hits); 1000 overlaps_tet %.3f ms (%d hits); 1000 "

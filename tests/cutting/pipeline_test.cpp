@@ -11,6 +11,8 @@
 #include "octocut/cutting/mesh_check.hpp"
 #include "octocut/sim/primitives.hpp"
 #include "octocut/sim/surface_check.hpp"
+#include "../common/shapes.hpp"
+#include "watertight.hpp"
 
 namespace octocut {
 namespace {
@@ -18,48 +20,12 @@ namespace {
 using sim::Box3;
 using sim::Vec3;
 
-// A closed, outward n-gon prism around the z axis, centred on `c`, radius r (to the polygon's corners), height h, m.
-sim::TriMesh prism(const Vec3& c, double r, double h, int n) {
-  sim::TriMesh m;
-  for (int s = 0; s < 2; ++s)
-    for (int i = 0; i < n; ++i) {
-      const double a = 2.0 * std::numbers::pi * i / n;
-      m.vertices.push_back(c + Vec3(r * std::cos(a), r * std::sin(a), (s ? 0.5 : -0.5) * h));
-    }
-  m.vertices.push_back(c + Vec3(0, 0, -0.5 * h));
-  m.vertices.push_back(c + Vec3(0, 0, 0.5 * h));
-  const int bc = 2 * n, tc = 2 * n + 1;
-  for (int i = 0; i < n; ++i) {
-    const int j = (i + 1) % n;
-    m.triangles.push_back({i, j, n + j});
-    m.triangles.push_back({i, n + j, n + i});
-    m.triangles.push_back({bc, j, i});
-    m.triangles.push_back({tc, n + i, n + j});
-  }
-  return m;
-}
-double prism_area(double r, int n) { return 0.5 * n * r * r * std::sin(2.0 * std::numbers::pi / n); }
+using test::expect_watertight;
+using test::prism_area;
+
+sim::TriMesh prism(const Vec3& c, double r, double h, int n) { return test::prism_mesh(c, r, h, n); }
 
 sim::TriMesh box_mesh(const Box3& b) { return sim::closed_box_grid(b, 1); }
-
-// Independent watertightness: every directed edge once, with its reverse once; no degenerate triangle.
-::testing::AssertionResult watertight(const sim::TriMesh& m) {
-  std::map<std::pair<int, int>, int> directed;
-  for (std::size_t f = 0; f < m.triangles.size(); ++f) {
-    const auto& t = m.triangles[f];
-    if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2]) return ::testing::AssertionFailure() << "degenerate " << f;
-    for (int k = 0; k < 3; ++k) ++directed[{t[std::size_t(k)], t[std::size_t((k + 1) % 3)]}];
-  }
-  for (const auto& [e, n] : directed) {
-    if (n != 1) return ::testing::AssertionFailure() << "edge " << e.first << "-" << e.second << " used " << n << " times";
-    const auto r = directed.find({e.second, e.first});
-    if (r == directed.end() || r->second != 1)
-      return ::testing::AssertionFailure() << "edge " << e.first << "-" << e.second << " has no opposite";
-  }
-  if (!m.triangles.empty() && cutting::find_self_intersection(m))
-    return ::testing::AssertionFailure() << "self-intersecting";
-  return ::testing::AssertionSuccess();
-}
 
 long euler_characteristic(const sim::TriMesh& m) {
   return long(m.vertices.size()) - long(m.triangles.size()) * 3 / 2 + long(m.triangles.size());
@@ -120,7 +86,7 @@ TEST(CutPipeline, PunchThroughASlabAtRest) {
   const double expect = prism_area(r, n) * 0.004;
   EXPECT_NEAR(out.removed_volume, expect, 1e-9 * expect);
   EXPECT_NEAR(v0 - sim::signed_volume(o.cut.surface), out.removed_volume, 1e-12 * v0);
-  EXPECT_TRUE(watertight(o.cut.surface));
+  expect_watertight(o.cut.surface, "surface");
   // One through-hole: genus 1, chi = 0.
   EXPECT_EQ(euler_characteristic(o.cut.surface), 0);
   EXPECT_GT(out.tets_removed, 0);
@@ -156,14 +122,14 @@ TEST(CutPipeline, BladeFlushWithTheSurfaceAndOnItsVertices) {
   const double expect = 0.01 * 0.01 * 0.002;
   EXPECT_NEAR(out.removed_volume, expect, 1e-9 * expect);
   EXPECT_NEAR(v0 - sim::signed_volume(o.cut.surface), expect, 1e-9 * expect);
-  EXPECT_TRUE(watertight(o.cut.surface));
+  expect_watertight(o.cut.surface, "surface");
   EXPECT_EQ(euler_characteristic(o.cut.surface), 2);  // a pocket, no hole
   EXPECT_EQ(o.sim->model().dofs().check_invariants(), "");
   // A blade that only touches the top face from outside removes nothing.
   const auto touch = cut(o, box_mesh({Vec3(0.002, 0.002, 0.004), Vec3(0.008, 0.008, 0.006)}), 0.001);
   EXPECT_TRUE(touch.status == "no-op" || (touch.status == "ok" && touch.removed_volume == 0.0))
       << touch.status << " " << touch.reason;
-  EXPECT_TRUE(watertight(o.cut.surface));
+  expect_watertight(o.cut.surface, "surface");
 }
 
 TEST(CutPipeline, BladeThatMissesIsANoOp) {
@@ -205,7 +171,7 @@ TEST(CutPipeline, CavityUnderAnAffineStretchRemovesTheBackTransformedVolume) {
   const double expect = prism_area(0.002, 24) * 0.004 / 1.25;
   EXPECT_NEAR(out.removed_volume, expect, 1e-9 * expect);
   EXPECT_NEAR(v0 - sim::signed_volume(o.cut.surface), expect, 1e-9 * expect);
-  EXPECT_TRUE(watertight(o.cut.surface));
+  expect_watertight(o.cut.surface, "surface");
   EXPECT_EQ(sim::check_surface(o.cut.surface).components, 2);  // the outer surface and the cavity
   EXPECT_EQ(euler_characteristic(o.cut.surface), 4);             // two spheres
   EXPECT_DOUBLE_EQ(out.max_blend, 0.0);
@@ -225,7 +191,7 @@ TEST(CutPipeline, FiftyPunchesAtOneSpotStayBounded) {
     o.sim->step();
   }
   EXPECT_LE(o.sim->model().num_elements(), 2 * after_first);
-  EXPECT_TRUE(watertight(o.cut.surface));
+  expect_watertight(o.cut.surface, "surface");
   for (const Vec3& x : o.sim->state().x) ASSERT_TRUE(x.allFinite());
 }
 
@@ -237,7 +203,7 @@ TEST(CutPipeline, PunchIntoInvertedElementsNeverCrashes) {
   o.sim->set_state(st);
   const auto out = cut(o, prism(Vec3(0.02, 0.02, 0.002), 0.002, 0.01, 32), 0.0019);
   ASSERT_TRUE(out.status == "ok" || out.status == "skipped") << out.reason;
-  EXPECT_TRUE(watertight(o.cut.surface));
+  expect_watertight(o.cut.surface, "surface");
   EXPECT_EQ(o.sim->model().dofs().check_invariants(), "");
   for (int i = 0; i < 3; ++i) o.sim->step();
   for (const Vec3& x : o.sim->state().x) ASSERT_TRUE(x.allFinite());
@@ -261,7 +227,7 @@ TEST(CutPipeline, FoldedSlabPunchedOnceShowsTwoHolesInRestSpace) {
   EXPECT_EQ(out.components, 2);
   const double expect = 2.0 * prism_area(r, 32) * 0.004;
   EXPECT_NEAR(out.removed_volume, expect, 1e-9 * expect);
-  EXPECT_TRUE(watertight(o.cut.surface));
+  expect_watertight(o.cut.surface, "surface");
   EXPECT_EQ(euler_characteristic(o.cut.surface), -2);  // genus 2: two through-holes
   // The holes are where the back-transforms put them.
   int near20 = 0, near60 = 0;
@@ -306,7 +272,7 @@ TEST(CutPipeline, SlabCutInTwoKeepsBothHeldHalves) {
   sim::element_components(o.sim->model(), count);
   EXPECT_EQ(count, 2);
   EXPECT_EQ(sim::check_surface(o.cut.surface).components, 2);
-  EXPECT_TRUE(watertight(o.cut.surface));
+  expect_watertight(o.cut.surface, "surface");
   const double expect = 0.006 * 0.04 * 0.004;
   EXPECT_NEAR(out.removed_volume, expect, 1e-9 * expect);
 }
@@ -328,7 +294,7 @@ TEST(CutPipeline, LooseHalfIsRemovedAsAFragment) {
       // The right half's material is gone from the simulation: about 17 x 40 x 4 mm (the M tets the wall touched
       // widen the gap by at most one 1 mm cell on each side).
       EXPECT_NEAR(out.fragment_volume, 0.017 * 0.04 * 0.004, 0.0015 * 0.04 * 0.004);
-      EXPECT_TRUE(watertight(o.cut.surface));
+      expect_watertight(o.cut.surface, "surface");
       for (const Vec3& x : o.cut.surface.vertices) EXPECT_LT(x.x(), 0.0175);
     } else {
       EXPECT_EQ(out.fragments_removed, 0);

@@ -9,6 +9,7 @@
 #include <set>
 
 #include "octocut/sim/dof_map.hpp"
+#include "../common/kuhn_grid.hpp"
 #include "octocut/sim/material_graph.hpp"
 #include "test_util.hpp"
 
@@ -22,28 +23,8 @@ constexpr double kSlabVolume = 0.25;  // m^3
 
 // The slab's tets in the cubes (i, j, k) that `keep` accepts, as a material graph.
 std::shared_ptr<MaterialGraph> slab(const std::function<bool(int, int, int)>& keep) {
-  TetMesh m;
-  auto id = [](int i, int j, int k) { return int32_t((k * (kNy + 1) + j) * (kNx + 1) + i); };
-  for (int k = 0; k <= kNz; ++k)
-    for (int j = 0; j <= kNy; ++j)
-      for (int i = 0; i <= kNx; ++i) m.vertices.push_back(kCube * Vec3(i, j, k));
-  const int perms[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
-  for (int k = 0; k < kNz; ++k)
-    for (int j = 0; j < kNy; ++j)
-      for (int i = 0; i < kNx; ++i) {
-        if (!keep(i, j, k)) continue;
-        for (const auto& p : perms) {
-          std::array<int, 3> c{i, j, k};
-          std::array<int32_t, 4> t{};
-          t[0] = id(c[0], c[1], c[2]);
-          for (int s = 0; s < 3; ++s) {
-            ++c[std::size_t(p[s])];
-            t[std::size_t(s) + 1] = id(c[0], c[1], c[2]);
-          }
-          m.tets.push_back(t);
-        }
-      }
-  return std::make_shared<MaterialGraph>(std::move(m));
+  return std::make_shared<MaterialGraph>(
+      octocut::test::kuhn_grid(Vec3::Zero(), Vec3::Constant(kCube), {kNx, kNy, kNz}, keep));
 }
 
 // Rest-space box of the cubes [i0, i1) x [j0, j1) x [0, kNz): what a cut that removes them changed.
@@ -65,19 +46,7 @@ ObjectModel slab_model(std::vector<HandleSpec> handles = {}, std::vector<RefineS
   return ObjectModel::build(spec, slab([](int, int, int) { return true; }), {}, std::move(handles));
 }
 
-void expect_same(const DofMap& a, const DofMap& b) {
-  EXPECT_EQ(a.num_dofs, b.num_dofs);
-  EXPECT_EQ(a.hanging_slots, b.hanging_slots);
-  EXPECT_EQ(a.nodes, b.nodes);
-  EXPECT_EQ(a.node_dof_begin, b.node_dof_begin);
-  EXPECT_EQ(a.dof_node, b.dof_node);
-  EXPECT_EQ(a.dof_slot, b.dof_slot);
-  EXPECT_EQ(a.slot_begin, b.slot_begin);
-  EXPECT_EQ(a.slot_dof, b.slot_dof);
-  EXPECT_EQ(a.slot_weight, b.slot_weight);
-  EXPECT_EQ(a.slot_master, b.slot_master);
-  EXPECT_EQ(a.dof_rest, b.dof_rest);
-}
+using test::expect_same;
 
 // The DOFs that the slots of element e reference.
 std::set<int> element_dofs(const ObjectModel& m, int e) {

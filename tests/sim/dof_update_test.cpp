@@ -10,20 +10,7 @@
 namespace octocut::sim {
 namespace {
 
-void expect_same(const DofMap& a, const DofMap& b) {
-  EXPECT_EQ(a.num_dofs, b.num_dofs);
-  EXPECT_EQ(a.hanging_slots, b.hanging_slots);
-  EXPECT_EQ(a.nodes, b.nodes);
-  EXPECT_EQ(a.node_dof_begin, b.node_dof_begin);
-  EXPECT_EQ(a.dof_node, b.dof_node);
-  EXPECT_EQ(a.dof_slot, b.dof_slot);
-  EXPECT_EQ(a.slot_begin, b.slot_begin);
-  EXPECT_EQ(a.slot_dof, b.slot_dof);
-  EXPECT_EQ(a.slot_weight, b.slot_weight);
-  EXPECT_EQ(a.slot_master, b.slot_master);
-  ASSERT_EQ(a.dof_rest.size(), b.dof_rest.size());
-  for (std::size_t i = 0; i < a.dof_rest.size(); ++i) EXPECT_EQ(a.dof_rest[i], b.dof_rest[i]);
-}
+using test::expect_same;
 
 const RootGeometry kRoot{Vec3(0, 0, 0), 1.0};
 

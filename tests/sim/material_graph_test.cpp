@@ -6,6 +6,7 @@
 #include <random>
 
 #include "octocut/sim/material_graph.hpp"
+#include "../common/kuhn_grid.hpp"
 #include "test_util.hpp"
 
 namespace octocut::sim {
@@ -16,40 +17,7 @@ const std::array<Vec3, 4> kCorner{Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), V
 
 double cube3(double v) { return v > 0.0 ? v * v * v : 0.0; }
 
-// A box [lo, hi] split into 6 Kuhn tets per cell on an n×n×n grid whose interior vertices are jittered by up to
-// `jitter` of a cell (the boundary stays on the box, so the tets tile the box exactly).
-TetMesh kuhn_box(const Box3& box, int n, double jitter, unsigned seed) {
-  TetMesh m;
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> u(-jitter, jitter);
-  const Vec3 h = (box.max - box.min) / n;
-  auto id = [&](int i, int j, int k) { return int32_t((k * (n + 1) + j) * (n + 1) + i); };
-  for (int k = 0; k <= n; ++k)
-    for (int j = 0; j <= n; ++j)
-      for (int i = 0; i <= n; ++i) {
-        Vec3 p = box.min + Vec3(i * h.x(), j * h.y(), k * h.z());
-        const std::array<int, 3> g{i, j, k};
-        for (int a = 0; a < 3; ++a)
-          if (g[std::size_t(a)] > 0 && g[std::size_t(a)] < n) p[a] += u(rng) * h[a];
-        m.vertices.push_back(p);
-      }
-  // The six tets of a cube along the main diagonal (0 → 7), one per axis permutation.
-  const int perms[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
-  for (int k = 0; k < n; ++k)
-    for (int j = 0; j < n; ++j)
-      for (int i = 0; i < n; ++i)
-        for (const auto& p : perms) {
-          std::array<int, 3> c{i, j, k};
-          std::array<int32_t, 4> t{};
-          t[0] = id(c[0], c[1], c[2]);
-          for (int s = 0; s < 3; ++s) {
-            ++c[std::size_t(p[s])];
-            t[std::size_t(s) + 1] = id(c[0], c[1], c[2]);
-          }
-          m.tets.push_back(t);
-        }
-  return m;
-}
+using octocut::test::kuhn_box;
 
 TEST(TetClip, CornerTetInCubeMatchesInclusionExclusion) {
   // Volume of {x + y + z <= 1} within [0, a]^3 by inclusion–exclusion over the faces x = a, y = a, z = a.

@@ -6,6 +6,7 @@
 #include <functional>
 
 #include "octocut/sim/dof_map.hpp"
+#include "../common/kuhn_grid.hpp"
 #include "octocut/sim/material_graph.hpp"
 #include "test_util.hpp"
 
@@ -17,28 +18,8 @@ constexpr int kNx = 16, kNy = 16, kNz = 4;
 constexpr double kCube = 1.0 / 16.0;  // m
 
 std::shared_ptr<MaterialGraph> slab(const std::function<bool(int, int, int)>& keep) {
-  TetMesh m;
-  auto id = [](int i, int j, int k) { return int32_t((k * (kNy + 1) + j) * (kNx + 1) + i); };
-  for (int k = 0; k <= kNz; ++k)
-    for (int j = 0; j <= kNy; ++j)
-      for (int i = 0; i <= kNx; ++i) m.vertices.push_back(kCube * Vec3(i, j, k));
-  const int perms[6][3] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
-  for (int k = 0; k < kNz; ++k)
-    for (int j = 0; j < kNy; ++j)
-      for (int i = 0; i < kNx; ++i) {
-        if (!keep(i, j, k)) continue;
-        for (const auto& p : perms) {
-          std::array<int, 3> c{i, j, k};
-          std::array<int32_t, 4> t{};
-          t[0] = id(c[0], c[1], c[2]);
-          for (int s = 0; s < 3; ++s) {
-            ++c[std::size_t(p[s])];
-            t[std::size_t(s) + 1] = id(c[0], c[1], c[2]);
-          }
-          m.tets.push_back(t);
-        }
-      }
-  return std::make_shared<MaterialGraph>(std::move(m));
+  return std::make_shared<MaterialGraph>(
+      octocut::test::kuhn_grid(Vec3::Zero(), Vec3::Constant(kCube), {kNx, kNy, kNz}, keep));
 }
 
 // The slab in a root cube grown beyond it (so that leaves along its faces are partly empty and some children are
@@ -53,19 +34,7 @@ ObjectModel slab_model(const std::shared_ptr<MaterialGraph>& material, int max_l
   return ObjectModel::build(spec, material, {}, {handle});
 }
 
-void expect_same(const DofMap& a, const DofMap& b) {
-  EXPECT_EQ(a.num_dofs, b.num_dofs);
-  EXPECT_EQ(a.hanging_slots, b.hanging_slots);
-  EXPECT_EQ(a.nodes, b.nodes);
-  EXPECT_EQ(a.node_dof_begin, b.node_dof_begin);
-  EXPECT_EQ(a.dof_node, b.dof_node);
-  EXPECT_EQ(a.dof_slot, b.dof_slot);
-  EXPECT_EQ(a.slot_begin, b.slot_begin);
-  EXPECT_EQ(a.slot_dof, b.slot_dof);
-  EXPECT_EQ(a.slot_weight, b.slot_weight);
-  EXPECT_EQ(a.slot_master, b.slot_master);
-  EXPECT_EQ(a.dof_rest, b.dof_rest);
-}
+using test::expect_same;
 
 void expect_same(const ObjectModel& a, const ObjectModel& b) {
   EXPECT_EQ(a.tree().leaves(), b.tree().leaves());

@@ -1,5 +1,7 @@
 #pragma once
 // Shared helpers and tolerances of the sim tests.
+#include <gtest/gtest.h>
+
 #include <memory>
 #include <random>
 
@@ -7,6 +9,21 @@
 #include "octocut/sim/simulator.hpp"
 
 namespace octocut::sim::test {
+
+/// Every field of two DOF maps is equal (the local update against the global build, for instance).
+inline void expect_same(const DofMap& a, const DofMap& b) {
+  EXPECT_EQ(a.num_dofs, b.num_dofs);
+  EXPECT_EQ(a.hanging_slots, b.hanging_slots);
+  EXPECT_EQ(a.nodes, b.nodes);
+  EXPECT_EQ(a.node_dof_begin, b.node_dof_begin);
+  EXPECT_EQ(a.dof_node, b.dof_node);
+  EXPECT_EQ(a.dof_slot, b.dof_slot);
+  EXPECT_EQ(a.slot_begin, b.slot_begin);
+  EXPECT_EQ(a.slot_dof, b.slot_dof);
+  EXPECT_EQ(a.slot_weight, b.slot_weight);
+  EXPECT_EQ(a.slot_master, b.slot_master);
+  EXPECT_EQ(a.dof_rest, b.dof_rest);
+}
 
 /// Relative tolerance for identities that hold up to round-off.
 inline constexpr double kExact = 1e-10;

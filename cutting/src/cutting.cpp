@@ -4,7 +4,9 @@
 #include <chrono>
 #include <cmath>
 #include <numeric>
+#include <optional>
 #include <stdexcept>
+#include <thread>
 
 #include "octocut/cutting/blade.hpp"
 #include "octocut/cutting/shape_matching.hpp"
@@ -125,6 +127,127 @@ struct StageFailure : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// What stages 3 and 4 and the solver preparation produce (see run_model_stages).
+struct ModelWork {
+  std::string error;                                ///< why a stage failed; empty when none did
+  bool dead_empty = true;                           ///< the blades touch no tet of M
+  int tets_removed = 0, leaves_refined = 0, fragments_removed = 0;
+  double fragment_volume = 0.0;                     ///< m^3
+  std::shared_ptr<const sim::MaterialGraph> graph;  ///< M after the cut
+  bool all_gone = false;                            ///< no material is left
+  std::vector<int> fragment_leaves;                 ///< leaves of *before_fragments that the fragments held
+  std::optional<sim::ObjectModel> before_fragments; ///< the split model, kept only when fragments go
+  sim::PreparedModel prepared;                      ///< the new revision, its state and its symbolic analysis
+  double ms_material_graph = 0.0, ms_refine = 0.0, ms_node_split = 0.0, ms_prepare = 0.0;
+};
+
+// Stages 3 (material graph) and 4 (refine, node split, fragments), then the new revision's FEM system, carried-over
+// state and symbolic analysis (the solver part of stage 5), for the rest-space blades. Reads the simulator and M,
+// changes nothing. Throws StageFailure.
+void run_model_stages(ModelWork& w, const std::vector<sim::TriMesh>& blades,
+                      const std::shared_ptr<const sim::MaterialGraph>& material_ptr,
+                      const sim::ObjectModel& model, const sim::Simulator& simulator, const CutOptions& options,
+                      double inscribed_radius) {
+  const sim::RootGeometry& root = model.root();
+  const sim::MaterialGraph& material = *material_ptr;
+  // ---- 3. material_graph -------------------------------------------------------------------------------------------
+  auto t0 = Clock::now();
+  std::vector<int> dead;
+  std::vector<sim::Box3> changed;
+  std::vector<BladeVolume> rest_volumes;
+  for (const sim::TriMesh& b : blades) {
+    rest_volumes.emplace_back(b);
+    const std::vector<int> tets = tets_touched(material, rest_volumes.back());
+    if (tets.empty()) continue;
+    sim::Box3 region{sim::Vec3::Constant(INFINITY), sim::Vec3::Constant(-INFINITY)};
+    for (int t : tets) {
+      for (const sim::Vec3& p : material.tet(t)) region = grow(region, {p, p});
+    }
+    changed.push_back(region);
+    dead.insert(dead.end(), tets.begin(), tets.end());
+  }
+  std::sort(dead.begin(), dead.end());
+  dead.erase(std::unique(dead.begin(), dead.end()), dead.end());
+  w.tets_removed = int(dead.size());
+  w.dead_empty = dead.empty();
+  std::shared_ptr<const sim::MaterialGraph> graph =
+      dead.empty() ? material_ptr : material.without(dead);
+  w.ms_material_graph = ms_since(t0);
+
+  // ---- 4. refine, then node_split ----------------------------------------------------------------------------------
+  t0 = Clock::now();
+  const double le = inscribed_radius / std::sqrt(3.0);
+  // Leaves that meet a rest-space blade with an edge above l_e, level after level, refined in one revision. When
+  // tets go, that revision takes the new material too: the leaves the cut touches are measured once and the DOFs
+  // are split in the same update, so with_material below finds its work done.
+  auto meets_blade = [&](const sim::Cell& c) {
+    if (c.level >= model.max_level() || !(root.cell_edge(c) > le)) return false;
+    const sim::Box3 box = root.cell_box(c);
+    return std::any_of(rest_volumes.begin(), rest_volumes.end(), [&](const BladeVolume& bv) {
+      return boxes_overlap(box, bv.bounds()) && bv.overlaps_box(box);
+    });
+  };
+  sim::ObjectModel next = !dead.empty() && graph->num_tets() > 0
+                              ? model.refined_with_material(meets_blade, graph, changed, &w.leaves_refined)
+                              : model.refined_where(meets_blade, &w.leaves_refined);
+  w.ms_refine = ms_since(t0);
+
+  t0 = Clock::now();
+  if (!dead.empty()) {
+    if (graph->num_tets() == 0) {
+      w.all_gone = true;
+    } else {
+      next = next.with_material(graph, changed);
+      w.all_gone = next.num_elements() == 0;
+    }
+  }
+  // Loose pieces: components of elements that no handle holds. Without any handle, the largest piece counts as
+  // the body and only the others are loose.
+  if (!w.all_gone && options.fragments != FragmentPolicy::none) {
+    int count = 0;
+    const std::vector<int> comp = sim::element_components(next, count);
+    if (count > 1) {
+      const std::vector<sim::ComponentInfo> info = sim::component_info(next, comp, count);
+      const bool any_anchor = std::any_of(info.begin(), info.end(), [](const auto& c) { return c.anchored; });
+      int body = -1;
+      if (!any_anchor) {
+        body = 0;
+        for (int c = 1; c < count; ++c)
+          if (info[std::size_t(c)].volume > info[std::size_t(body)].volume) body = c;
+      }
+      std::vector<char> remove(std::size_t(count), 0);
+      for (int c = 0; c < count; ++c) {
+        const auto& ci = info[std::size_t(c)];
+        if (ci.anchored || c == body) continue;
+        if (options.fragments == FragmentPolicy::small && !(ci.volume < options.fragment_volume)) continue;
+        remove[std::size_t(c)] = 1;
+        ++w.fragments_removed;
+        w.fragment_volume += ci.volume;
+      }
+      for (int e = 0; e < next.num_elements(); ++e)
+        if (remove[std::size_t(comp[std::size_t(e)])]) w.fragment_leaves.push_back(e);
+    }
+  }
+  if (!w.fragment_leaves.empty()) {
+    if (w.fragment_leaves.size() == std::size_t(next.num_elements())) {
+      w.all_gone = true;
+      w.before_fragments = std::move(next);
+    } else {
+      sim::ObjectModel rest = next.without_leaves(w.fragment_leaves);
+      w.before_fragments = std::move(next);
+      next = std::move(rest);
+    }
+  }
+  w.graph = std::move(graph);
+  w.ms_node_split = ms_since(t0);
+
+  // ---- 5. (the solver part) -----------------------------------------------------------------------------------------
+  if (w.all_gone) return;
+  t0 = Clock::now();
+  w.prepared = simulator.prepare_model(std::move(next), true);
+  w.ms_prepare = ms_since(t0);
+}
+
 }  // namespace
 
 CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceEmbedding& embedding,
@@ -222,6 +345,23 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     }
     out.ms.back_transform = ms_since(t0);
 
+    // Stages 3 and 4 and the new revision's solver preparation read only M, T, the state and the rest-space blades,
+    // never S: they run on a second thread (the model thread) while this one cuts S (stage 2). Nothing is committed
+    // until both are done, so the cut stays one transaction; the results do not depend on the interleaving.
+    const auto model_stages = [&](const std::vector<sim::TriMesh>& blades) {
+      ModelWork w;
+      try {
+        run_model_stages(w, blades, object.graph, model, simulator, options, request.inscribed_radius);
+      } catch (const StageFailure& e) {
+        w.error = e.what();
+      } catch (const std::exception& e) {
+        w.error = std::string("unexpected error: ") + e.what();
+      }
+      return w;
+    };
+    ModelWork work;
+    std::jthread model_thread([&, blades = rest_blades] { work = model_stages(blades); });
+
     // ---- 2. surface ------------------------------------------------------------------------------------------------
     t0 = Clock::now();
     // The first blade cuts object.surface itself; the track copies S only when no blade changed it (S stays as it
@@ -264,93 +404,27 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     out.ms.surface = ms_since(t0);
     if (!surface_changed) track.mesh = object.surface;
 
-    // ---- 3. material_graph -----------------------------------------------------------------------------------------
-    t0 = Clock::now();
-    std::vector<int> dead;
-    std::vector<sim::Box3> changed;
-    std::vector<BladeVolume> rest_volumes;
-    for (const sim::TriMesh& b : rest_blades) {
-      rest_volumes.emplace_back(b);
-      const std::vector<int> tets = tets_touched(*object.graph, rest_volumes.back());
-      if (tets.empty()) continue;
-      sim::Box3 region{sim::Vec3::Constant(INFINITY), sim::Vec3::Constant(-INFINITY)};
-      for (int t : tets) {
-        for (const sim::Vec3& p : object.graph->tet(t)) region = grow(region, {p, p});
-      }
-      changed.push_back(region);
-      dead.insert(dead.end(), tets.begin(), tets.end());
-    }
-    std::sort(dead.begin(), dead.end());
-    dead.erase(std::unique(dead.begin(), dead.end()), dead.end());
-    out.tets_removed = int(dead.size());
-    if (dead.empty() && !surface_changed) {
-      out.ms.material_graph = ms_since(t0);
-      return finish("no-op", "the blade removes no material");
-    }
-    std::shared_ptr<const sim::MaterialGraph> graph = dead.empty() ? object.graph : object.graph->without(dead);
-    out.ms.material_graph = ms_since(t0);
+    model_thread.join();
+    // A perturbed blade removes material where it now is: the model stages run again, here, with the blades used.
+    if (out.perturbed > 0) work = model_stages(rest_blades);
+    if (!work.error.empty()) throw StageFailure(work.error);
+    out.tets_removed = work.tets_removed;
+    out.leaves_refined = work.leaves_refined;
+    out.fragments_removed = work.fragments_removed;
+    out.fragment_volume = work.fragment_volume;
+    out.ms.material_graph = work.ms_material_graph;
+    out.ms.refine = work.ms_refine;
+    out.ms.node_split = work.ms_node_split;
+    if (work.dead_empty && !surface_changed) return finish("no-op", "the blade removes no material");
 
-    // ---- 4. refine, then node_split --------------------------------------------------------------------------------
-    t0 = Clock::now();
-    const double le = request.inscribed_radius / std::sqrt(3.0);
-    // Leaves that meet a rest-space blade with an edge above l_e, level after level, refined in one revision. When
-    // tets go, that revision takes the new material too: the leaves the cut touches are measured once and the DOFs
-    // are split in the same update, so with_material below finds its work done.
-    auto meets_blade = [&](const sim::Cell& c) {
-      if (c.level >= model.max_level() || !(root.cell_edge(c) > le)) return false;
-      const sim::Box3 box = root.cell_box(c);
-      return std::any_of(rest_volumes.begin(), rest_volumes.end(), [&](const BladeVolume& bv) {
-        return boxes_overlap(box, bv.bounds()) && bv.overlaps_box(box);
-      });
-    };
-    sim::ObjectModel next = !dead.empty() && graph->num_tets() > 0
-                                ? model.refined_with_material(meets_blade, graph, changed, &out.leaves_refined)
-                                : model.refined_where(meets_blade, &out.leaves_refined);
-    out.ms.refine = ms_since(t0);
-
-    t0 = Clock::now();
-    bool all_gone = false;
-    if (!dead.empty()) {
-      if (graph->num_tets() == 0) {
-        all_gone = true;
-      } else {
-        next = next.with_material(graph, changed);
-        all_gone = next.num_elements() == 0;
-      }
-    }
-    // Loose pieces: components of elements that no handle holds. Without any handle, the largest piece counts as
-    // the body and only the others are loose.
-    std::vector<int> fragment_leaves;
-    if (!all_gone && options.fragments != FragmentPolicy::none) {
-      int count = 0;
-      const std::vector<int> comp = sim::element_components(next, count);
-      if (count > 1) {
-        const std::vector<sim::ComponentInfo> info = sim::component_info(next, comp, count);
-        const bool any_anchor = std::any_of(info.begin(), info.end(), [](const auto& c) { return c.anchored; });
-        int body = -1;
-        if (!any_anchor) {
-          body = 0;
-          for (int c = 1; c < count; ++c)
-            if (info[std::size_t(c)].volume > info[std::size_t(body)].volume) body = c;
-        }
-        std::vector<char> remove(std::size_t(count), 0);
-        for (int c = 0; c < count; ++c) {
-          const auto& ci = info[std::size_t(c)];
-          if (ci.anchored || c == body) continue;
-          if (options.fragments == FragmentPolicy::small && !(ci.volume < options.fragment_volume)) continue;
-          remove[std::size_t(c)] = 1;
-          ++out.fragments_removed;
-          out.fragment_volume += ci.volume;
-        }
-        for (int e = 0; e < next.num_elements(); ++e)
-          if (remove[std::size_t(comp[std::size_t(e)])]) fragment_leaves.push_back(e);
-      }
-    }
-    if (!fragment_leaves.empty()) {
-      // The surface parts that lie in the removed pieces go with them: a component of S whose vertices mostly lie
-      // in removed leaves.
-      std::vector<char> gone_leaf(std::size_t(next.num_elements()), 0);
-      for (int e : fragment_leaves) gone_leaf[std::size_t(e)] = 1;
+    // The surface parts that lie in the removed pieces go with them: a component of S whose vertices mostly lie in
+    // removed leaves.
+    bool all_gone = work.all_gone;
+    if (!work.fragment_leaves.empty()) {
+      t0 = Clock::now();
+      const sim::ObjectModel& split = *work.before_fragments;  // the model whose leaves fragment_leaves lists
+      std::vector<char> gone_leaf(std::size_t(split.num_elements()), 0);
+      for (int e : work.fragment_leaves) gone_leaf[std::size_t(e)] = 1;
       int ncomp = 0;
       const std::vector<int> tcomp = triangle_components(track.mesh, ncomp);
       std::vector<int> in_gone(std::size_t(ncomp), 0), total(std::size_t(ncomp), 0);
@@ -360,7 +434,7 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
           if (seen[std::size_t(v)]) continue;
           seen[std::size_t(v)] = 1;
           ++total[std::size_t(tcomp[f])];
-          const auto pe = next.embed(track.mesh.vertices[std::size_t(v)]);
+          const auto pe = split.embed(track.mesh.vertices[std::size_t(v)]);
           if (pe && gone_leaf[std::size_t(pe->leaf)]) ++in_gone[std::size_t(tcomp[f])];
         }
       }
@@ -375,13 +449,8 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
         track.remove_triangles(drop);
         surface_changed = true;
       }
-      if (fragment_leaves.size() == std::size_t(next.num_elements())) {
-        all_gone = true;
-      } else {
-        next = next.without_leaves(fragment_leaves);
-      }
+      out.ms.node_split += ms_since(t0);
     }
-    out.ms.node_split = ms_since(t0);
 
     // ---- 5. embedding, then the solver -----------------------------------------------------------------------------
     t0 = Clock::now();
@@ -389,7 +458,7 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
       // Nothing is left to simulate: the object is gone. The simulator keeps its last model but is no longer run.
       object.surface = sim::TriMesh{};
       object.cut_faces.clear();
-      object.graph = graph;
+      object.graph = work.graph;
       object.removed = true;
       out.ms.embedding = ms_since(t0);
       return finish("ok", "");
@@ -405,22 +474,17 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     }
     edit.inserted_rest.assign(track.mesh.vertices.begin() + std::ptrdiff_t(kept), track.mesh.vertices.end());
     edit.triangles = track.mesh.triangles;
-    embedding.update(next, edit);  // strong guarantee: unchanged when it throws
+    embedding.update(work.prepared.model(), edit);  // strong guarantee: unchanged when it throws
     out.ms.embedding = ms_since(t0);
 
     t0 = Clock::now();
-    simulator.set_model(std::move(next));
-    try {
-      simulator.refresh_solver();
-    } catch (const std::exception&) {
-      // The next step analyses the pattern again and its guards handle a solver failure.
-    }
-    out.ms.solver_update = ms_since(t0);
+    simulator.adopt(std::move(work.prepared));
+    out.ms.solver_update = work.ms_prepare + ms_since(t0);
 
     // Commit the object.
     object.surface = std::move(track.mesh);
     object.cut_faces = std::move(track.cut_face);
-    object.graph = std::move(graph);
+    object.graph = std::move(work.graph);
     return finish("ok", "");
   } catch (const StageFailure& e) {
     return finish("skipped", e.what());

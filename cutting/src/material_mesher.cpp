@@ -1,6 +1,8 @@
 // CGAL Mesh_3 behind cutting::mesh_interior. This is one of the few translation units that include CGAL.
 #include "octocut/cutting/material_mesher.hpp"
 
+#include "cgal_exact.hpp"  // first: the exact number type of Epeck
+
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Mesh_complex_3_in_triangulation_3.h>
 #include <CGAL/Mesh_criteria_3.h>

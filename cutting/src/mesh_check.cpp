@@ -1,6 +1,8 @@
 // Self-intersection test on a CGAL Surface_mesh. The only translation unit of the mesh checks that sees CGAL.
 #include "octocut/cutting/mesh_check.hpp"
 
+#include "cgal_exact.hpp"  // first: the exact number type of Epeck
+
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Polygon_mesh_processing/self_intersections.h>
 #include <CGAL/Surface_mesh.h>

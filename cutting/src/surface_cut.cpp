@@ -20,6 +20,8 @@
 //     verify_self_intersections), and V(S) - V(S') is summed over the changed faces only.
 #include "octocut/cutting/surface_cut.hpp"
 
+#include "cgal_exact.hpp"  // first: the exact number type of Epeck
+
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Polygon_mesh_processing/corefinement.h>
 #include <CGAL/Polygon_mesh_processing/self_intersections.h>
@@ -671,6 +673,17 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
     PMP::corefine(pmesh, bmesh,
                   PMP::parameters::edge_is_constrained_map(p_constrained).visitor(visitor).throw_on_self_intersection(true),
                   PMP::parameters::edge_is_constrained_map(b_constrained));
+  }
+
+  // The intersection points, rounded from their exact values, must be finite (a defect of the exact number type's
+  // conversion would show here first).
+  for (const Mesh* m : {&pmesh, &bmesh}) {
+    for (const VI v : m->vertices()) {
+      const Point& p = m->point(v);
+      if (!std::isfinite(p.x()) || !std::isfinite(p.y()) || !std::isfinite(p.z())) {
+        throw CutFailure{"an intersection point is not finite"};
+      }
+    }
   }
 
   // Regions of both meshes.

@@ -36,8 +36,9 @@ void element_slots(const std::vector<Vec3>& slots, int e, Vec24& xe, Eigen::Matr
 // ---- FemSystem -------------------------------------------------------------------------------------------------------
 
 struct FemSystem::Impl {
-  const ObjectModel& model;
-  Executor& executor;
+  const ObjectModel* model_ptr;  // the model this system was built for (the simulator's, or a prepared one's)
+  const ObjectModel& model() const { return *model_ptr; }
+  Executor* executor_ptr;  // runs the element loops (the simulator's, or a serial one while prepared)
   std::vector<std::vector<GatherEntry>> gather;  // per element: its slots' rows of P (num_elements)
   std::vector<Vec24> rest;                        // rest slot positions per element, m (num_elements)
 
@@ -49,7 +50,7 @@ struct FemSystem::Impl {
   std::vector<int> diag_offsets;                  // per scalar DOF: offset of its diagonal entry (3 num_dofs)
   std::vector<double> rotated;                    // per element R K R^T, scaled (num_elements x 576)
 
-  Impl(const ObjectModel& m, Executor& ex) : model(m), executor(ex) {
+  Impl(const ObjectModel& m, Executor& ex) : model_ptr(&m), executor_ptr(&ex) {
     const DofMap& dm = m.dofs();
     const int ne = m.num_elements();
     gather.resize(std::size_t(ne));
@@ -64,11 +65,11 @@ struct FemSystem::Impl {
     }
   }
 
-  Mat24 element_k(int e) const { return model.stiffness_scale()[std::size_t(e)] * model.unit_stiffness(); }
+  Mat24 element_k(int e) const { return model().stiffness_scale()[std::size_t(e)] * model().unit_stiffness(); }
 
   // Adds the element vectors (num_elements x 24) into a DOF vector through P^T, in a fixed order.
   void gather_vectors(const std::vector<Vec24>& fe, VecX& f) const {
-    f.setZero(3 * model.num_dofs());
+    f.setZero(3 * model().num_dofs());
     for (std::size_t e = 0; e < gather.size(); ++e)
       for (const GatherEntry& g : gather[e]) f.segment<3>(3 * g.dof) += g.w * fe[e].segment<3>(3 * g.corner);
   }
@@ -81,8 +82,8 @@ struct FemSystem::Impl {
   }
 
   void build_pattern(const std::vector<char>& constrained) {
-    const int nd = model.num_dofs();
-    const int ne = model.num_elements();
+    const int nd = model().num_dofs();
+    const int ne = model().num_elements();
     // Block structure first (3 x 3 blocks of DOF pairs), in flat arrays: the free DOFs each element couples, sorted
     // and unique (elem_ptr, elem_dof), the elements of each DOF (dof_ptr, dof_elem), and per block column the sorted
     // block rows (col_ptr, col_row), the union of its elements' DOFs. Every diagonal block is present, constrained
@@ -142,7 +143,7 @@ struct FemSystem::Impl {
     int* inner = pattern.innerIndexPtr();
     double* values = pattern.valuePtr();
     diag_offsets.resize(3 * std::size_t(nd));
-    executor.parallel_for(nd, 256, [&](int kb, int ke) {
+    executor_ptr->parallel_for(nd, 256, [&](int kb, int ke) {
       for (int k = kb; k < ke; ++k) {
         const int b = col_ptr[std::size_t(k)], len = col_ptr[std::size_t(k) + 1] - b;
         const int* rows = col_row.data() + b;
@@ -174,7 +175,7 @@ struct FemSystem::Impl {
     }
     pair_begin[std::size_t(ne)] = pairs;
     pair_offsets.resize(pairs);
-    executor.parallel_for(ne, kGrain, [&](int eb, int ee) {
+    executor_ptr->parallel_for(ne, kGrain, [&](int eb, int ee) {
       std::vector<int> local;  // index in the element's DOF list of each gather entry, -1 when constrained
       std::vector<int> pos;    // pos[a * n + b]: position of DOF b in block column a (element-local indices)
       for (int e = eb; e < ee; ++e) {
@@ -217,16 +218,21 @@ FemSystem::FemSystem(const ObjectModel& model, Executor& executor)
     : m_impl(std::make_unique<Impl>(model, executor)) {}
 FemSystem::~FemSystem() = default;
 
+void FemSystem::rebind(const ObjectModel& model, Executor& executor) {
+  m_impl->model_ptr = &model;
+  m_impl->executor_ptr = &executor;
+}
+
 void FemSystem::prolong(const std::vector<Vec3>& dofs, std::vector<Vec3>& slots) const {
-  m_impl->model.dofs().prolong(dofs, slots);
+  m_impl->model().dofs().prolong(dofs, slots);
 }
 
 void FemSystem::rotations(const std::vector<Vec3>& x, ElementFrame& frame) const {
-  const ObjectModel& m = m_impl->model;
+  const ObjectModel& m = m_impl->model();
   std::vector<Vec3> slots;
   prolong(x, slots);
   frame.rotation.resize(std::size_t(m.num_elements()));
-  m_impl->executor.parallel_for(m.num_elements(), kGrain, [&](int b, int en) {
+  m_impl->executor_ptr->parallel_for(m.num_elements(), kGrain, [&](int b, int en) {
     Vec24 xe;
     Eigen::Matrix<double, 3, 8> xm;
     for (int e = b; e < en; ++e) {
@@ -238,13 +244,13 @@ void FemSystem::rotations(const std::vector<Vec3>& x, ElementFrame& frame) const
 
 void FemSystem::force_and_product(const std::vector<Vec3>& x, const ElementFrame& frame, const VecX& v, VecX& f,
                                   VecX& kv) const {
-  const ObjectModel& m = m_impl->model;
+  const ObjectModel& m = m_impl->model();
   const int ne = m.num_elements();
   std::vector<Vec3> slots;
   prolong(x, slots);
   const bool want_kv = v.size() == 3 * m.num_dofs();
   std::vector<Vec24> fe(static_cast<std::size_t>(ne)), kve(want_kv ? std::size_t(ne) : 0);
-  m_impl->executor.parallel_for(ne, kGrain, [&](int b, int en) {
+  m_impl->executor_ptr->parallel_for(ne, kGrain, [&](int b, int en) {
     Vec24 xe;
     Eigen::Matrix<double, 3, 8> xm;
     for (int e = b; e < en; ++e) {
@@ -272,7 +278,7 @@ void FemSystem::elastic_force(const std::vector<Vec3>& x, const ElementFrame& fr
 }
 
 double FemSystem::elastic_energy(const std::vector<Vec3>& x, const ElementFrame& frame) const {
-  const ObjectModel& m = m_impl->model;
+  const ObjectModel& m = m_impl->model();
   std::vector<Vec3> slots;
   prolong(x, slots);
   double energy = 0.0;
@@ -288,7 +294,7 @@ double FemSystem::elastic_energy(const std::vector<Vec3>& x, const ElementFrame&
 }
 
 SpMat FemSystem::stiffness(const ElementFrame& frame) const {
-  const ObjectModel& m = m_impl->model;
+  const ObjectModel& m = m_impl->model();
   std::vector<Eigen::Triplet<double>> t;
   for (int e = 0; e < m.num_elements(); ++e) {
     const Mat24 Ke = corotated_stiffness(m_impl->element_k(e), frame.rotation[std::size_t(e)]);
@@ -304,9 +310,9 @@ SpMat FemSystem::stiffness(const ElementFrame& frame) const {
 }
 
 void FemSystem::stiffness_product(const ElementFrame& frame, const VecX& v, VecX& out) const {
-  const ObjectModel& m = m_impl->model;
+  const ObjectModel& m = m_impl->model();
   std::vector<Vec24> ke(std::size_t(m.num_elements()));
-  m_impl->executor.parallel_for(m.num_elements(), kGrain, [&](int b, int en) {
+  m_impl->executor_ptr->parallel_for(m.num_elements(), kGrain, [&](int b, int en) {
     for (int e = b; e < en; ++e)
       ke[std::size_t(e)] =
           corotated_stiffness(m_impl->element_k(e), frame.rotation[std::size_t(e)]) * m_impl->element_vector(e, v);
@@ -323,7 +329,7 @@ const SpMat& FemSystem::system_pattern(const std::vector<char>& constrained) {
 void FemSystem::assemble_system(double mc, double kc, const ElementFrame& frame,
                                 const std::vector<char>& constrained, const VecX& u, SpMat& A, VecX& coupling) {
   Impl& im = *m_impl;
-  const ObjectModel& m = im.model;
+  const ObjectModel& m = im.model();
   const int ne = m.num_elements();
   const int nd = m.num_dofs();
   if (!im.have_pattern || im.pattern_constrained != constrained) {
@@ -334,7 +340,7 @@ void FemSystem::assemble_system(double mc, double kc, const ElementFrame& frame,
 
   // Rotated element stiffness, in parallel (independent per element).
   im.rotated.resize(std::size_t(ne) * 576);
-  im.executor.parallel_for(ne, kGrain, [&](int b, int en) {
+  im.executor_ptr->parallel_for(ne, kGrain, [&](int b, int en) {
     for (int e = b; e < en; ++e) {
       Eigen::Map<Mat24> out(im.rotated.data() + 576 * std::size_t(e));
       out = corotated_stiffness(kc * im.element_k(e), frame.rotation[std::size_t(e)]);
@@ -388,12 +394,7 @@ Simulator::Simulator(ObjectModel model, const SimulatorOptions& options)
     : m_model(std::move(model)), m_options(options) {
   if (!(options.dt > 0.0)) throw std::invalid_argument("Simulator: dt must be positive");
   m_executor = std::make_unique<Executor>(options.threads);
-  LinearSolverOptions lo;
-  lo.tolerance = options.tolerance;
-  lo.max_iterations = options.max_iterations;
-  lo.preconditioner = options.preconditioner;
-  lo.threads = m_executor->threads();
-  m_solver = make_linear_solver(options.linear_solver, lo);
+  m_solver = make_solver();
   m_state = SimState::rest(m_model);
   rebuild();
 }
@@ -422,6 +423,75 @@ void Simulator::refresh_solver() {
   // into it with the values.
   m_solver->analyze_pattern(m_fem->system_pattern(m_constrained));
   m_pattern_analyzed = true;
+}
+
+std::unique_ptr<LinearSolver> Simulator::make_solver() const {
+  LinearSolverOptions lo;
+  lo.tolerance = m_options.tolerance;
+  lo.max_iterations = m_options.max_iterations;
+  lo.preconditioner = m_options.preconditioner;
+  lo.threads = m_executor->threads();
+  return make_linear_solver(m_options.linear_solver, lo);
+}
+
+struct PreparedModel::Impl {
+  // One thread for the element loops of the preparation: it runs beside the cut's surface stage, which keeps the
+  // other core busy. adopt() hands the system the simulator's executor.
+  std::unique_ptr<Executor> serial = std::make_unique<Executor>(1);
+  std::unique_ptr<ObjectModel> model;  // on the heap: the FEM system points to it, and adopt() moves it
+  SimState state;
+  std::unique_ptr<FemSystem> fem;
+  std::vector<char> constrained;       // 1 for DOFs driven by a handle (num_dofs)
+  std::unique_ptr<LinearSolver> solver;
+  bool analyzed = false;
+};
+
+PreparedModel::PreparedModel() = default;
+PreparedModel::PreparedModel(PreparedModel&&) noexcept = default;
+PreparedModel& PreparedModel::operator=(PreparedModel&&) noexcept = default;
+PreparedModel::~PreparedModel() = default;
+const ObjectModel& PreparedModel::model() const {
+  if (!m_impl) throw std::logic_error("PreparedModel::model: empty");
+  return *m_impl->model;
+}
+
+PreparedModel Simulator::prepare_model(ObjectModel model, bool analyze) const {
+  PreparedModel out;
+  out.m_impl = std::make_unique<PreparedModel::Impl>();
+  PreparedModel::Impl& p = *out.m_impl;
+  p.state = transfer_state(m_model, m_state, model);
+  p.model = std::make_unique<ObjectModel>(std::move(model));
+  p.fem = std::make_unique<FemSystem>(*p.model, *p.serial);
+  p.constrained.assign(std::size_t(p.model->num_dofs()), 0);
+  for (int d = 0; d < p.model->num_dofs(); ++d)
+    p.constrained[std::size_t(d)] = p.model->dof_handle()[std::size_t(d)] >= 0;
+  p.solver = make_solver();
+  if (analyze && p.model->num_dofs() > 0) {
+    try {
+      p.solver->analyze_pattern(p.fem->system_pattern(p.constrained));
+      p.analyzed = true;
+    } catch (const std::exception&) {
+      // The next step analyses the pattern again, and its guards handle a solver failure.
+    }
+  }
+  return out;
+}
+
+void Simulator::adopt(PreparedModel prepared) {
+  if (!prepared.m_impl) throw std::invalid_argument("Simulator::adopt: empty PreparedModel");
+  PreparedModel::Impl& p = *prepared.m_impl;
+  if (int(p.state.x.size()) != p.model->num_dofs())
+    throw std::invalid_argument("Simulator::adopt: the prepared state does not match its model");
+  // Nothing below throws (moves and swaps), so the simulator is either unchanged or fully switched.
+  m_model = std::move(*p.model);
+  m_state = std::move(p.state);
+  m_fem = std::move(p.fem);
+  m_fem->rebind(m_model, *m_executor);
+  m_constrained = std::move(p.constrained);
+  m_solver = std::move(p.solver);
+  m_A = SpMat();
+  m_pattern_analyzed = p.analyzed;
+  m_dv_prev = VecX::Zero(3 * m_model.num_dofs());
 }
 
 void Simulator::set_state(SimState state) {

@@ -14,8 +14,9 @@ class MeshingError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-/// Version of the meshing recipe (criteria, options). Part of the cache key: changing the recipe must bump it.
-inline constexpr int kMesherVersion = 1;
+/// Version of the meshing recipe (criteria, options, CGAL's exact number type, cutting/src/cgal_exact.hpp). Part of
+/// the cache key: changing the recipe must bump it. 2: Epeck's exact type became Quotient<Mpzf>.
+inline constexpr int kMesherVersion = 2;
 
 /// Tetrahedralises the interior of a closed, outward-oriented surface with CGAL Mesh_3 at `cell_size` (m):
 /// facet size and tet size cell_size, facet distance cell_size / 10, facet angle 25°, radius–edge ratio 3; no

@@ -75,11 +75,31 @@ class FemSystem {
   /// The fixed sparsity pattern of the system matrix for the constrained flags (num_dofs), values zero; built once
   /// per flags and kept.
   const SpMat& system_pattern(const std::vector<char>& constrained);
+  /// Points the system at `model`, which must be the model it was built for, moved to another address, and runs its
+  /// element loops on `executor` from now on.
+  void rebind(const ObjectModel& model, Executor& executor);
   /// Like elastic_force, and also the product K v of the corotated stiffness with v (both 3 num_dofs).
   void force_and_product(const std::vector<Vec3>& x, const ElementFrame& frame, const VecX& v, VecX& f,
                          VecX& kv) const;
 
  private:
+  struct Impl;
+  std::unique_ptr<Impl> m_impl;
+};
+
+/// A model revision made ready off to the side by Simulator::prepare_model: the state carried over, the FEM system,
+/// and optionally the system pattern with the linear solver's symbolic analysis. Move-only.
+class PreparedModel {
+ public:
+  PreparedModel();
+  PreparedModel(PreparedModel&&) noexcept;
+  PreparedModel& operator=(PreparedModel&&) noexcept;
+  ~PreparedModel();
+  /// The prepared revision. Throws std::logic_error when empty (default-constructed or moved from).
+  [[nodiscard]] const ObjectModel& model() const;
+
+ private:
+  friend class Simulator;
   struct Impl;
   std::unique_ptr<Impl> m_impl;
 };
@@ -103,6 +123,15 @@ class Simulator {
   /// Builds the system matrix pattern of the current revision and runs the linear solver's symbolic analysis now,
   /// instead of in the next step (a cut calls it, so that its cost is counted where the topology changed).
   void refresh_solver();
+  /// Builds what set_model followed by refresh_solver (when `analyze`) would, without changing the simulator: the
+  /// state carried over from the current one, the FEM system of `model`, and the symbolic analysis of its system
+  /// pattern in a new linear solver. Const and touching no shared state but the executor, so a cut can run it on
+  /// another thread while the simulator is not stepped (and nothing else uses the executor). A failed analysis is
+  /// left to the next step, as in refresh_solver's callers.
+  [[nodiscard]] PreparedModel prepare_model(ObjectModel model, bool analyze) const;
+  /// Switches to a prepared revision: afterwards the simulator is as set_model + refresh_solver would have left it.
+  /// The state to carry over was taken when it was prepared: nothing may have stepped the simulator since.
+  void adopt(PreparedModel prepared);
   /// Replaces the state (same revision).
   void set_state(SimState state);
 
@@ -128,6 +157,7 @@ class Simulator {
  private:
   bool try_dynamic_step(double dt);
   void rebuild();
+  [[nodiscard]] std::unique_ptr<LinearSolver> make_solver() const;
 
   ObjectModel m_model;
   SimulatorOptions m_options;

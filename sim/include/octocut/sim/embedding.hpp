@@ -16,6 +16,7 @@
 #include <array>
 #include <cstdint>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include "octocut/sim/object.hpp"
@@ -24,6 +25,35 @@
 #include "octocut/sim/types.hpp"
 
 namespace octocut::sim {
+
+namespace detail {
+/// A std::vector whose copies keep the source's capacity, for the arrays that a cut lengthens: a copied embedding
+/// has the same spare room for the next cuts as the original, so that its first update() does not move those arrays
+/// into fresh pages.
+template <class T>
+class RoomyVector : public std::vector<T> {
+ public:
+  using std::vector<T>::operator=;
+  RoomyVector() = default;
+  RoomyVector(std::vector<T>&& v) noexcept : std::vector<T>(std::move(v)) {}
+  RoomyVector(const RoomyVector& other) {
+    this->reserve(other.capacity());
+    this->insert(this->end(), other.begin(), other.end());
+  }
+  RoomyVector(RoomyVector&&) noexcept = default;
+  RoomyVector& operator=(const RoomyVector& other) {
+    if (this == &other) return *this;
+    if (this->capacity() < other.capacity()) {
+      std::vector<T>().swap(*this);
+      this->reserve(other.capacity());
+    }
+    this->assign(other.begin(), other.end());
+    return *this;
+  }
+  RoomyVector& operator=(RoomyVector&&) noexcept = default;
+  ~RoomyVector() = default;
+};
+}  // namespace detail
 
 /// One entry of the Z-curve list: a vertex and the Morton code of the finest grid cell that holds its rest position.
 struct ZEntry {
@@ -67,7 +97,7 @@ class ZCurveList {
 
  private:
   RootGeometry m_root;
-  std::vector<ZEntry> m_entries;  ///< sorted by (code, vertex) (|V|)
+  detail::RoomyVector<ZEntry> m_entries;  ///< sorted by (code, vertex) (|V|)
   bool m_merged = false;
   std::vector<ZEntry> m_added;       ///< scratch of update(): the new entries, sorted (n')
   std::vector<std::size_t> m_at;     ///< scratch of update(): insertion points (n')
@@ -184,15 +214,15 @@ class SurfaceEmbedding {
 
   RootGeometry m_root;
   Octree m_tree;                                   ///< the tree of the model the vertices are bound to
-  std::vector<Vec3> m_rest;                        ///< rest positions, m (|V|)
-  std::vector<std::array<int32_t, 3>> m_triangles; ///< (|F|)
+  detail::RoomyVector<Vec3> m_rest;                ///< rest positions, m (|V|)
+  detail::RoomyVector<std::array<int32_t, 3>> m_triangles;  ///< (|F|)
   ZCurveList m_zcurve;                             ///< (|V|)
-  std::vector<VertexEmbedding> m_embedding;        ///< (|V|)
+  detail::RoomyVector<VertexEmbedding> m_embedding;  ///< (|V|)
   std::vector<int> m_begin;                        ///< CSR row starts of the composed weights (|V| + 1)
-  std::vector<int> m_dof;                          ///< DOF of each entry (nnz)
-  std::vector<double> m_weight;                    ///< weight of each entry, dimensionless (nnz)
+  detail::RoomyVector<int> m_dof;                  ///< DOF of each entry (nnz)
+  detail::RoomyVector<double> m_weight;            ///< weight of each entry, dimensionless (nnz)
   std::vector<int> m_tri_begin;                    ///< vertex-to-triangle CSR row starts (|V| + 1)
-  std::vector<int> m_tri;                          ///< incident triangles of each vertex, ascending (3 |F|)
+  detail::RoomyVector<int> m_tri;                  ///< incident triangles of each vertex, ascending (3 |F|)
   int m_num_dofs = 0;                              ///< DOFs of the bound model
   // The bound model's P and DOF nodes, kept so that update() can tell the leaves whose rows of P a new revision
   // leaves unchanged (up to DOF numbering) and keep their vertices' composed rows.

@@ -880,7 +880,8 @@ std::vector<int> SurfaceEmbedding::apply(const ObjectModel& new_model, const Sur
     }
     std::size_t end = v + 1;
     while (end < nv_old && end - v < kChunk && map[end] >= 0) ++end;
-    std::copy(m_rest.begin() + std::ptrdiff_t(v), m_rest.begin() + std::ptrdiff_t(end), m_rest.begin() + std::ptrdiff_t(k));
+    std::copy(m_rest.begin() + std::ptrdiff_t(v), m_rest.begin() + std::ptrdiff_t(end),
+              m_rest.begin() + std::ptrdiff_t(k));
     std::copy(m_embedding.begin() + std::ptrdiff_t(v), m_embedding.begin() + std::ptrdiff_t(end),
               m_embedding.begin() + std::ptrdiff_t(k));
     for (std::size_t u = v; u < end; ++u) rebind_kept(k + (u - v), u);

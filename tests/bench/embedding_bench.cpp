@@ -151,7 +151,8 @@ const Cut50k& cut50k() {
     // New indices: the inner vertices (row-major), then the quad centres.
     auto inner = [&](int i, int j) { return next + (i - kI0 - 1) * (kJ1 - kJ0 - 1) + (j - kJ0 - 1); };
     for (int i = kI0 + 1; i < kI1; ++i)
-      for (int j = kJ0 + 1; j < kJ1; ++j) edit.inserted_rest.push_back(pushed(f.surface.vertices[std::size_t(ring(i, j))]));
+      for (int j = kJ0 + 1; j < kJ1; ++j)
+        edit.inserted_rest.push_back(pushed(f.surface.vertices[std::size_t(ring(i, j))]));
     auto vertex = [&](int i, int j) {
       return map[std::size_t(ring(i, j))] >= 0 ? map[std::size_t(ring(i, j))] : inner(i, j);
     };
@@ -232,7 +233,10 @@ BENCHMARK(BM_DeformedPositions50k)->ArgName("threads")->Arg(1)->Arg(2)->UseRealT
 BENCHMARK(BM_DeformedNormals50k)->ArgName("threads")->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_EmbeddingBuild50k)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_SurfaceUpdateCut10k)->ArgName("level")->Arg(4)->Arg(5)->Arg(6)->Unit(benchmark::kMillisecond);
-BENCHMARK(BM_SurfaceUpdateCut50k)->ArgNames({"fresh_copy", "moved_edit"})->ArgsProduct({{0, 1}, {0, 1}})->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_SurfaceUpdateCut50k)
+    ->ArgNames({"fresh_copy", "moved_edit"})
+    ->ArgsProduct({{0, 1}, {0, 1}})
+    ->Unit(benchmark::kMicrosecond);
 
 }  // namespace
 

@@ -36,7 +36,7 @@ class RoomyVector : public std::vector<T> {
   using std::vector<T>::operator=;
   RoomyVector() = default;
   RoomyVector(std::vector<T>&& v) noexcept : std::vector<T>(std::move(v)) {}
-  RoomyVector(const RoomyVector& other) {
+  RoomyVector(const RoomyVector& other) : std::vector<T>() {
     this->reserve(other.capacity());
     this->insert(this->end(), other.begin(), other.end());
   }
@@ -232,13 +232,12 @@ class SurfaceEmbedding {
   std::vector<std::uint64_t> m_dof_node;           ///< node_key() of each DOF's node (num_dofs)
   // Scratch of compose(): the next row starts, swapped with the current ones (the entries are moved in place).
   std::vector<int> m_next_begin;                   ///< (|V| + 1)
-  // Scratch of update(), kept from call to call so that a cut neither allocates nor faults in fresh pages.
+  // Scratch of update(), kept from call to call so that a cut allocates little and faults in few fresh pages.
   std::vector<int> m_next_tri_begin;               ///< corner counts, then the adjacency's row starts (|V| + 2)
   std::vector<char> m_redo;                        ///< 1 for each vertex to re-embed (|V|)
   std::vector<int> m_redo_list;                    ///< the vertices to re-embed, ascending (<= |V|)
   std::vector<int> m_reuse_from;                   ///< old vertex whose composed row a vertex keeps, or -1 (|V|)
-  std::vector<int> m_new_begin;                    ///< compose(): row starts of the rows composed anew (rows + 1)
-  std::vector<int> m_new_dof;                      ///< compose(): their DOFs (entries)
+  std::vector<int> m_new_dof;                      ///< compose(): DOFs of the rows composed anew (entries)
   std::vector<double> m_new_weight;                ///< compose(): their weights, dimensionless (entries)
   int m_last_reembedded = 0;
 };

@@ -505,21 +505,24 @@ VertexEmbedding embed_vertex(const Octree& tree, const RootGeometry& root, const
 SurfaceEmbedding::SurfaceEmbedding(const ObjectModel& model, std::vector<Vec3> rest,
                                    std::vector<std::array<int32_t, 3>> triangles)
     : m_root(model.root()), m_tree(model.tree()), m_rest(std::move(rest)), m_triangles(std::move(triangles)) {
-  check_triangles(m_triangles, m_rest.size());
+  count_corners(m_triangles, m_rest.size());
   m_zcurve = ZCurveList(m_root, m_rest);
   m_embedding.assign(m_rest.size(), VertexEmbedding{});
   build_adjacency();
-  embed(model, {});
+  embed(model, {}, true);
   compose(model.dofs(), {}, {});
   m_last_reembedded = num_vertices();
   // Room for the first cuts, written once here, so that the first update() neither moves the per-vertex arrays
-  // nor takes its scratch CSR's pages from the system (a cut adds a few hundred vertices at most).
+  // and the CSR nor takes its scratch pages from the system (a cut adds a few hundred vertices at most).
   const std::size_t room = m_rest.size() + m_rest.size() / 8;
   m_rest.reserve(room);
   m_embedding.reserve(room);
+  m_dof.reserve(m_dof.size() + m_dof.size() / 8);
+  m_weight.reserve(m_dof.capacity());
   m_next_begin.assign(room + 1, 0);
-  m_next_dof.assign(m_dof.size() + m_dof.size() / 8, 0);
-  m_next_weight.assign(m_next_dof.size(), 0.0);
+  m_next_tri_begin.assign(room + 2, 0);
+  m_redo.assign(room, 0);
+  m_reuse_from.assign(room, 0);
 }
 
 std::span<const ZEntry> SurfaceEmbedding::vertices_in_leaf(int leaf) const {
@@ -549,15 +552,18 @@ void SurfaceEmbedding::check_triangles(const std::vector<std::array<int32_t, 3>>
     }
 }
 
-void SurfaceEmbedding::embed(const ObjectModel& model, const std::vector<char>& redo) {
-  const std::size_t nv = m_rest.size();
-  // Re-embed the flagged vertices (all of them when no flags are given); those in no leaf are collected.
+void SurfaceEmbedding::embed(const ObjectModel& model, std::span<const int> redo, bool all) {
+  // Re-embed the listed vertices (all of them when `all` is set); those in no leaf are collected, ascending.
   if (m_tree.size() == 0) throw std::invalid_argument("SurfaceEmbedding: the model has no leaf");
   std::vector<std::size_t> lost;
-  for (std::size_t v = 0; v < nv; ++v) {
-    if (!redo.empty() && !redo[v]) continue;
+  auto one = [&](std::size_t v) {
     m_embedding[v] = regular_embedding(m_tree, m_root, m_rest[v]);
     if (m_embedding[v].leaf < 0) lost.push_back(v);
+  };
+  if (all) {
+    for (std::size_t v = 0; v < m_rest.size(); ++v) one(v);
+  } else {
+    for (const int v : redo) one(std::size_t(v));
   }
   // The fallback vertices go to the nearest leaf of their anchor's material component (the plain nearest leaf when
   // their surface component has no regular vertex), found on a bucket grid built once for all of them. Every
@@ -588,40 +594,104 @@ void SurfaceEmbedding::embed(const ObjectModel& model, const std::vector<char>& 
 }
 
 void SurfaceEmbedding::compose(const DofMap& P, std::span<const int> reuse_from, std::span<const int> dof_map) {
-  // Into the scratch CSR, then swapped in: the old rows are read while the new ones are written.
   const std::size_t nv = m_rest.size();
-  m_next_begin.resize(nv + 1);
-  m_next_begin[0] = 0;
-  m_next_dof.clear();
-  m_next_weight.clear();
-  m_next_dof.reserve(m_dof.size() + 64);
-  m_next_weight.reserve(m_dof.size() + 64);
   std::vector<std::pair<int, double>> acc;
-  for (std::size_t v = 0; v < nv;) {
-    const int from = reuse_from.empty() ? -1 : reuse_from[v];
-    if (from < 0) {
-      compose_row(P, m_embedding[v], acc, m_next_dof, m_next_weight);
-      m_next_begin[++v] = int(m_next_dof.size());
-      continue;
+  if (reuse_from.empty()) {
+    // Every row anew, in vertex order.
+    m_begin.resize(nv + 1);
+    m_begin[0] = 0;
+    m_dof.clear();
+    m_weight.clear();
+    for (std::size_t v = 0; v < nv; ++v) {
+      compose_row(P, m_embedding[v], acc, m_dof, m_weight);
+      m_begin[v + 1] = int(m_dof.size());
     }
-    // A run of vertices that keep consecutive old rows (the same leaf rows up to the DOF numbering, which keeps
-    // the DOF order): the old entries in one block, DOFs renumbered.
-    std::size_t end = v + 1;
-    while (end < nv && reuse_from[end] == from + int(end - v)) ++end;
-    const std::size_t a = std::size_t(m_begin[std::size_t(from)]);
-    const std::size_t b = std::size_t(m_begin[std::size_t(from) + (end - v)]);
-    const std::size_t out = m_next_dof.size();
-    m_next_dof.resize(out + (b - a));
-    m_next_weight.insert(m_next_weight.end(), m_weight.begin() + std::ptrdiff_t(a), m_weight.begin() + std::ptrdiff_t(b));
-    int* dof = m_next_dof.data() + out;
-    for (std::size_t i = a; i < b; ++i) dof[i - a] = dof_map[std::size_t(m_dof[i])];
-    const int shift = int(out) - int(a);
-    for (std::size_t u = v; u < end; ++u) m_next_begin[u + 1] = m_begin[std::size_t(from) + (u - v) + 1] + shift;
-    v = end;
+  } else {
+    // The new CSR is a sequence of segments of entries: runs of kept rows, which are consecutive old rows
+    // (reuse_from increases, so their sources and destinations come in the same order), and runs of rows composed
+    // anew (into m_new_* first). The kept runs move inside m_dof and m_weight, DOFs renumbered: those that move down
+    // front to back, then those that move up back to front, so that none overwrites a source not yet moved; then
+    // the new rows fill the gaps.
+    struct Segment {
+      std::size_t src, dst, len;  // entries: old position (or position in m_new_*), new position, count
+      bool fresh;                 // composed anew
+    };
+    std::vector<Segment> segments;
+    m_next_begin.resize(nv + 1);
+    m_new_dof.clear();
+    m_new_weight.clear();
+    // Vertices 0 .. q - 1 keep their own rows where they are.
+    const std::size_t nv_old = m_begin.size() - 1;
+    std::size_t q = 0;
+    while (q < nv && q < nv_old && reuse_from[q] == int(q)) ++q;
+    std::copy(m_begin.begin(), m_begin.begin() + std::ptrdiff_t(q + 1), m_next_begin.begin());
+    if (q > 0) segments.push_back({0, 0, std::size_t(m_begin[q]), false});
+    for (std::size_t v = q; v < nv;) {
+      const int from = reuse_from[v];
+      const std::size_t dst = std::size_t(m_next_begin[v]);
+      if (from < 0) {
+        const std::size_t src = m_new_dof.size();
+        compose_row(P, m_embedding[v], acc, m_new_dof, m_new_weight);
+        const std::size_t len = m_new_dof.size() - src;
+        m_next_begin[v + 1] = int(dst + len);
+        if (!segments.empty() && segments.back().fresh && segments.back().dst + segments.back().len == dst)
+          segments.back().len += len;
+        else
+          segments.push_back({src, dst, len, true});
+        ++v;
+        continue;
+      }
+      std::size_t end = v + 1;
+      while (end < nv && reuse_from[end] == from + int(end - v)) ++end;
+      const std::size_t a = std::size_t(m_begin[std::size_t(from)]);
+      const std::size_t b = std::size_t(m_begin[std::size_t(from) + (end - v)]);
+      const int shift = int(dst) - int(a);
+      for (std::size_t u = v; u < end; ++u) m_next_begin[u + 1] = m_begin[std::size_t(from) + (u - v) + 1] + shift;
+      if (!segments.empty() && !segments.back().fresh && segments.back().src + segments.back().len == a &&
+          segments.back().dst + segments.back().len == dst)
+        segments.back().len += b - a;
+      else
+        segments.push_back({a, dst, b - a, false});
+      v = end;
+    }
+    const std::size_t nnz = std::size_t(m_next_begin[nv]);
+    if (nnz > m_dof.size()) {
+      m_dof.resize(nnz);
+      m_weight.resize(nnz);
+    }
+    // The DOFs below d0 keep their numbers (a cut renumbers those after its first new or removed node).
+    int d0 = 0;
+    while (std::size_t(d0) < dof_map.size() && dof_map[std::size_t(d0)] == d0) ++d0;
+    int* dof = m_dof.data();
+    double* weight = m_weight.data();
+    const int* renumber = dof_map.data();
+    for (const Segment& g : segments) {
+      if (g.fresh || g.dst > g.src) continue;
+      if (g.dst == g.src) {
+        for (std::size_t i = g.src; i < g.src + g.len; ++i)
+          if (dof[i] >= d0) dof[i] = renumber[dof[i]];
+      } else {
+        for (std::size_t i = 0; i < g.len; ++i) dof[g.dst + i] = renumber[dof[g.src + i]];
+        std::copy(weight + g.src, weight + g.src + g.len, weight + g.dst);
+      }
+    }
+    for (auto it = segments.rbegin(); it != segments.rend(); ++it) {
+      const Segment& g = *it;
+      if (g.fresh || g.dst <= g.src) continue;
+      for (std::size_t i = g.len; i-- > 0;) dof[g.dst + i] = renumber[dof[g.src + i]];
+      std::copy_backward(weight + g.src, weight + g.src + g.len, weight + g.dst + g.len);
+    }
+    for (const Segment& g : segments) {
+      if (!g.fresh) continue;
+      std::copy(m_new_dof.begin() + std::ptrdiff_t(g.src), m_new_dof.begin() + std::ptrdiff_t(g.src + g.len),
+                dof + g.dst);
+      std::copy(m_new_weight.begin() + std::ptrdiff_t(g.src), m_new_weight.begin() + std::ptrdiff_t(g.src + g.len),
+                weight + g.dst);
+    }
+    m_dof.resize(nnz);
+    m_weight.resize(nnz);
+    m_begin.swap(m_next_begin);
   }
-  m_begin.swap(m_next_begin);
-  m_dof.swap(m_next_dof);
-  m_weight.swap(m_next_weight);
 
   // Keep the rows of P and the DOF nodes for the next update().
   m_num_dofs = P.num_dofs;
@@ -631,17 +701,37 @@ void SurfaceEmbedding::compose(const DofMap& P, std::span<const int> reuse_from,
   m_dof_node = P.dof_node;
 }
 
+void SurfaceEmbedding::count_corners(const std::vector<std::array<int32_t, 3>>& triangles, std::size_t num_vertices) {
+  // The corners at vertex v are counted at [v + 2], so that build_adjacency() turns the counts into row starts in
+  // place. One unsigned comparison per corner (negative indices wrap above any size); the culprit is searched for
+  // only on failure.
+  std::vector<int>& count = m_next_tri_begin;
+  count.assign(num_vertices + 2, 0);
+  bool bad = false;
+  for (const auto& t : triangles)
+    for (const int32_t v : t) {
+      if (std::size_t(std::uint32_t(v)) < num_vertices)
+        ++count[std::size_t(v) + 2];
+      else
+        bad = true;
+    }
+  if (bad) check_triangles(triangles, num_vertices);
+}
+
 void SurfaceEmbedding::build_adjacency() {
-  // Vertex-to-triangle CSR; a triangle appears once per corner it has at the vertex, triangles ascending.
+  // Vertex-to-triangle CSR; a triangle appears once per corner it has at the vertex, triangles ascending. A counting
+  // sort on the counts of count_corners(): after the prefix sum, start[v + 1] is the first slot of vertex v; the
+  // scatter advances it to the first slot of v + 1, so that start[0 .. |V|] ends up as the row starts.
   const std::size_t nv = m_rest.size();
-  m_tri_begin.assign(nv + 1, 0);
-  for (const auto& t : m_triangles)
-    for (const int32_t v : t) ++m_tri_begin[std::size_t(v) + 1];
-  for (std::size_t v = 0; v < nv; ++v) m_tri_begin[v + 1] += m_tri_begin[v];
-  m_tri.assign(std::size_t(m_tri_begin[nv]), 0);
-  std::vector<int> fill(m_tri_begin.begin(), m_tri_begin.end() - 1);
+  std::vector<int>& start = m_next_tri_begin;
+  for (std::size_t i = 2; i < nv + 2; ++i) start[i] += start[i - 1];
+  m_tri.resize(std::size_t(start[nv + 1]));
+  int* slot = start.data() + 1;
+  int* tri = m_tri.data();
   for (std::size_t t = 0; t < m_triangles.size(); ++t)
-    for (const int32_t v : m_triangles[t]) m_tri[std::size_t(fill[std::size_t(v)]++)] = int(t);
+    for (const int32_t v : m_triangles[t]) tri[slot[v]++] = int(t);
+  start.pop_back();
+  m_tri_begin.swap(start);
 }
 
 void SurfaceEmbedding::deformed_positions(const std::vector<Vec3>& x_dofs, std::vector<Vec3>& positions,
@@ -695,23 +785,34 @@ void SurfaceEmbedding::deformed_normals(const std::vector<Vec3>& positions, std:
 }
 
 std::vector<int> SurfaceEmbedding::update(const ObjectModel& new_model, const SurfaceEdit& edit) {
-  // Validate everything before touching any member, so that a bad edit leaves the embedding as it was.
+  return apply(new_model, edit, nullptr);
+}
+
+std::vector<int> SurfaceEmbedding::update(const ObjectModel& new_model, SurfaceEdit&& edit) {
+  return apply(new_model, edit, &edit.triangles);
+}
+
+std::vector<int> SurfaceEmbedding::apply(const ObjectModel& new_model, const SurfaceEdit& edit,
+                                         std::vector<std::array<int32_t, 3>>* take) {
+  // Validate everything before touching any member but scratch, so that a bad edit leaves the embedding as it was.
   if (new_model.root().min != m_root.min || new_model.root().size != m_root.size)
     throw std::invalid_argument("SurfaceEmbedding::update: the new model has another root cube");
   if (new_model.tree().size() == 0) throw std::invalid_argument("SurfaceEmbedding::update: the new model has no leaf");
   check_index_list(edit.removed_vertices, m_rest.size(), "removed_vertices");
   check_finite(edit.inserted_rest, "inserted vertex");
-  const std::size_t nv_new = m_rest.size() - edit.removed_vertices.size() + edit.inserted_rest.size();
-  check_triangles(edit.triangles, nv_new);
+  const std::size_t nv_old = m_rest.size();
+  const std::size_t nv_new = nv_old - edit.removed_vertices.size() + edit.inserted_rest.size();
   for (std::size_t i = 0; i < edit.changed_leaves.size(); ++i) {
     const int l = edit.changed_leaves[i];
     if (l < 0 || l >= new_model.tree().size())
       throw std::invalid_argument("changed_leaves[" + std::to_string(i) + "] = " + std::to_string(l) +
                                   " is out of range [0, " + std::to_string(new_model.tree().size()) + ")");
   }
+  // The triangles are validated while their corners are counted for the adjacency (into scratch).
+  count_corners(edit.triangles, nv_new);
 
   // The Z-curve list: delete, renumber, insert.
-  const std::vector<int> map = m_zcurve.update(edit.removed_vertices, edit.inserted_rest);
+  std::vector<int> map = m_zcurve.update(edit.removed_vertices, edit.inserted_rest);
 
   // Leaves kept from the old tree keep their vertices' weights, renumbered (nothing to match when the tree is the same).
   const Octree& tree = new_model.tree();
@@ -735,59 +836,94 @@ std::vector<int> SurfaceEmbedding::update(const ObjectModel& new_model, const Su
     if (j >= 0) same_rows[std::size_t(j)] = same_leaf_rows(m_slot_begin, m_slot_dof, m_slot_weight, i, P, j, dof_map);
   }
 
-  // Kept vertices move down to their new index in place (the map is increasing), with their leaf renumbered; the
-  // fallback ones and those whose leaf is gone are flagged for re-embedding. reuse_from: the old vertex whose
-  // composed row a vertex keeps, or -1.
+  // Kept vertices move down to their new index (the map is increasing), with their leaf renumbered; the fallback
+  // ones and those whose leaf is gone are flagged for re-embedding. m_reuse_from: the old vertex whose composed row
+  // a vertex keeps, or -1. Flagged vertices are listed once each in m_redo_list.
   const std::size_t kept = nv_new - edit.inserted_rest.size();
-  std::vector<char> redo(nv_new, 0);
-  std::vector<int> reuse_from(nv_new, -1);
-  for (std::size_t v = 0; v < map.size(); ++v) {
-    const std::size_t k = std::size_t(map[v]);
-    if (map[v] < 0) continue;
-    m_rest[k] = m_rest[v];
-    VertexEmbedding e = m_embedding[v];
-    const int leaf = old_to_new[std::size_t(e.leaf)];
-    if (e.fallback || leaf < 0) {
-      redo[k] = 1;
-    } else {
-      e.leaf = leaf;
-      if (same_rows[std::size_t(leaf)]) reuse_from[k] = int(v);
+  m_redo.assign(nv_new, 0);
+  m_redo_list.clear();
+  m_reuse_from.resize(nv_new);
+  auto flag = [&](std::size_t k) {
+    if (!m_redo[k]) {
+      m_redo[k] = 1;
+      m_redo_list.push_back(int(k));
     }
-    m_embedding[k] = e;
+    m_reuse_from[k] = -1;
+  };
+  // Kept vertex k (old index v), already moved to k: its new leaf, or the flag.
+  auto rebind_kept = [&](std::size_t k, std::size_t v) {
+    VertexEmbedding& e = m_embedding[k];
+    const int leaf = e.fallback ? -1 : old_to_new[std::size_t(e.leaf)];
+    if (leaf < 0) {
+      flag(k);
+      return;
+    }
+    if (e.leaf != leaf) e.leaf = leaf;
+    m_reuse_from[k] = same_rows[std::size_t(leaf)] ? int(v) : -1;
+  };
+  if (nv_new > m_rest.capacity()) {
+    // Room for the next cuts too (one reallocation now instead of one per cut).
+    m_rest.reserve(nv_new + nv_new / 8);
+    m_embedding.reserve(nv_new + nv_new / 8);
+  }
+  // Before the first removed vertex nothing moves.
+  std::size_t first = nv_old;
+  for (const int v : edit.removed_vertices) first = std::min(first, std::size_t(v));
+  for (std::size_t v = 0; v < first; ++v) rebind_kept(v, v);
+  // After it, the runs between removed vertices move down, a cache-sized chunk at a time.
+  constexpr std::size_t kChunk = 512;
+  std::size_t k = first;
+  for (std::size_t v = first; v < nv_old;) {
+    if (map[v] < 0) {
+      ++v;
+      continue;
+    }
+    std::size_t end = v + 1;
+    while (end < nv_old && end - v < kChunk && map[end] >= 0) ++end;
+    std::copy(m_rest.begin() + std::ptrdiff_t(v), m_rest.begin() + std::ptrdiff_t(end),
+              m_rest.begin() + std::ptrdiff_t(k));
+    std::copy(m_embedding.begin() + std::ptrdiff_t(v), m_embedding.begin() + std::ptrdiff_t(end),
+              m_embedding.begin() + std::ptrdiff_t(k));
+    for (std::size_t u = v; u < end; ++u) rebind_kept(k + (u - v), u);
+    k += end - v;
+    v = end;
   }
   m_rest.resize(nv_new);
   m_embedding.resize(nv_new);
   for (std::size_t i = 0; i < edit.inserted_rest.size(); ++i) {
     m_rest[kept + i] = edit.inserted_rest[i];
-    redo[kept + i] = 1;
+    flag(kept + i);
   }
 
   // Vertices of new or changed leaves: two binary searches per leaf on the Z-curve list.
   auto flag_leaf = [&](int j) {
-    for (const ZEntry& z : m_zcurve.in_cell(tree.leaf(j))) {
-      redo[std::size_t(z.vertex)] = 1;
-      reuse_from[std::size_t(z.vertex)] = -1;
-    }
+    for (const ZEntry& z : m_zcurve.in_cell(tree.leaf(j))) flag(std::size_t(z.vertex));
   };
   for (int j = 0; j < (same_tree ? 0 : tree.size()); ++j)
     if (!kept_new[std::size_t(j)]) flag_leaf(j);
   for (const int j : edit.changed_leaves) flag_leaf(j);
+  std::sort(m_redo_list.begin(), m_redo_list.end());
 
   // Swap in the new surface and tree, re-embed the flagged vertices, and compose: kept rows renumbered, the others
   // anew through the new P.
-  m_triangles = edit.triangles;
+  if (take != nullptr) {
+    m_triangles.swap(*take);
+    take->clear();
+  } else {
+    m_triangles = edit.triangles;
+  }
   if (!same_tree) m_tree = tree;
   build_adjacency();
-  embed(new_model, redo);
-  compose(P, reuse_from, dof_map);
-  m_last_reembedded = int(std::count(redo.begin(), redo.end(), char(1)));
+  embed(new_model, m_redo_list, false);
+  compose(P, m_reuse_from, dof_map);
+  m_last_reembedded = int(m_redo_list.size());
   return map;
 }
 
 void SurfaceEmbedding::rebind(const ObjectModel& new_model) {
   SurfaceEdit edit;
   edit.triangles = m_triangles;
-  update(new_model, edit);
+  update(new_model, std::move(edit));
 }
 
 }  // namespace octocut::sim

@@ -656,6 +656,76 @@ TEST(SurfaceEmbedding, UpdateOneByOneWithRefinementEqualsRebuild) {
 TEST(SurfaceEmbedding, UpdateMergeEqualsRebuild) { check_update_equals_rebuild(400, true, false, true); }
 TEST(SurfaceEmbedding, UpdateMergeWithRefinementEqualsRebuild) { check_update_equals_rebuild(400, true, true, true); }
 
+// Euclidean distance from p to the closed box b, m.
+double box_distance(const Box3& b, const Vec3& p) { return (b.min - p).cwiseMax(p - b.max).cwiseMax(0.0).norm(); }
+
+// update() keeps the rows it can in the current CSR and moves them in runs: down where rows before them went, up
+// where rows before them grew (here the leaves around the first vertices are refined, so their rows gain the
+// hanging nodes' DOFs, while vertices further on are removed). Two successive cuts, by const reference and by rvalue,
+// must each equal a fresh embedding, and the rvalue overload must take the triangles over.
+TEST(SurfaceEmbedding, SuccessiveUpdatesByReferenceAndByRvalueEqualRebuild) {
+  const ObjectModel m = hanging_model();
+  const TriMesh s = ellipsoid(kCentre, kRadii, 48, 24);
+  SurfaceEmbedding by_ref(m, s.vertices, s.triangles), by_rvalue = by_ref;
+  std::vector<Vec3> rest = s.vertices;
+  std::vector<std::array<int32_t, 3>> triangles = s.triangles;
+  ObjectModel model = m;
+  for (int round = 0; round < 2; ++round) {
+    // Refine the leaves that hold the first vertices (or, second round, those of a middle band).
+    const Vec3 near = rest[round == 0 ? 0 : rest.size() / 2];
+    std::vector<int> pick;
+    for (int l = 0; l < model.num_elements(); ++l)
+      if (box_distance(model.root().cell_box(model.tree().leaf(l)), near) < 0.0015) pick.push_back(l);
+    ASSERT_FALSE(pick.empty());
+    model = model.refined(pick);
+    // Remove every 7th vertex of the last third, insert 5 new ones near the first vertex, joined by a fan.
+    SurfaceEdit edit;
+    std::vector<int> map(rest.size(), -1);
+    std::vector<Vec3> new_rest;
+    for (std::size_t v = 0; v < rest.size(); ++v) {
+      if (v > 2 * rest.size() / 3 && v % 7 == 0) {
+        edit.removed_vertices.push_back(int(v));
+      } else {
+        map[v] = int(new_rest.size());
+        new_rest.push_back(rest[v]);
+      }
+    }
+    const int next = int(new_rest.size());
+    for (int i = 0; i < 5; ++i) {
+      edit.inserted_rest.push_back(near + Vec3(-0.0002 * i, 0.0001 * i, -0.0003));
+      new_rest.push_back(edit.inserted_rest.back());
+    }
+    for (const auto& t : triangles)
+      if (map[std::size_t(t[0])] >= 0 && map[std::size_t(t[1])] >= 0 && map[std::size_t(t[2])] >= 0)
+        edit.triangles.push_back({map[std::size_t(t[0])], map[std::size_t(t[1])], map[std::size_t(t[2])]});
+    for (int i = 0; i + 2 < 5; ++i) edit.triangles.push_back({next + i, next + i + 1, next + i + 2});
+    for (int l = 0; l < model.num_elements(); ++l)
+      if (box_distance(model.root().cell_box(model.tree().leaf(l)), near) < 0.0015) edit.changed_leaves.push_back(l);
+
+    const std::vector<int> map_ref = by_ref.update(model, edit);
+    SurfaceEdit moved = edit;
+    const std::vector<int> map_rvalue = by_rvalue.update(model, std::move(moved));
+    EXPECT_EQ(map_ref, map);
+    EXPECT_EQ(map_rvalue, map);
+    EXPECT_TRUE(moved.triangles.empty());
+    const SurfaceEmbedding fresh(model, new_rest, edit.triangles);
+    expect_same(by_ref, fresh);
+    expect_same(by_rvalue, fresh);
+    EXPECT_EQ(by_ref.last_reembedded(), by_rvalue.last_reembedded());
+    EXPECT_LT(by_ref.last_reembedded(), by_ref.num_vertices() / 2);
+    Executor exec(1);
+    std::vector<Vec3> pa, pb, na, nb;
+    by_rvalue.deformed_positions(affine_dofs(model), pa, exec);
+    fresh.deformed_positions(affine_dofs(model), pb, exec);
+    EXPECT_EQ(pa, pb);
+    by_rvalue.deformed_normals(pa, na, exec);
+    fresh.deformed_normals(pb, nb, exec);
+    EXPECT_EQ(na, nb);
+    rest = new_rest;
+    triangles = edit.triangles;
+  }
+}
+
 TEST(SurfaceEmbedding, RebindAfterRefinementEqualsRebuild) {
   const ObjectModel m = hanging_model();
   const TriMesh s = ellipsoid(kCentre, kRadii, 48, 24);

@@ -16,6 +16,7 @@
 #include <array>
 #include <cstdint>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include "octocut/sim/object.hpp"
@@ -24,6 +25,35 @@
 #include "octocut/sim/types.hpp"
 
 namespace octocut::sim {
+
+namespace detail {
+/// A std::vector whose copies keep the source's capacity, for the arrays that a cut lengthens: a copied embedding
+/// has the same spare room for the next cuts as the original, so that its first update() does not move those arrays
+/// into fresh pages.
+template <class T>
+class RoomyVector : public std::vector<T> {
+ public:
+  using std::vector<T>::operator=;
+  RoomyVector() = default;
+  RoomyVector(std::vector<T>&& v) noexcept : std::vector<T>(std::move(v)) {}
+  RoomyVector(const RoomyVector& other) : std::vector<T>() {
+    this->reserve(other.capacity());
+    this->insert(this->end(), other.begin(), other.end());
+  }
+  RoomyVector(RoomyVector&&) noexcept = default;
+  RoomyVector& operator=(const RoomyVector& other) {
+    if (this == &other) return *this;
+    if (this->capacity() < other.capacity()) {
+      std::vector<T>().swap(*this);
+      this->reserve(other.capacity());
+    }
+    this->assign(other.begin(), other.end());
+    return *this;
+  }
+  RoomyVector& operator=(RoomyVector&&) noexcept = default;
+  ~RoomyVector() = default;
+};
+}  // namespace detail
 
 /// One entry of the Z-curve list: a vertex and the Morton code of the finest grid cell that holds its rest position.
 struct ZEntry {
@@ -67,7 +97,7 @@ class ZCurveList {
 
  private:
   RootGeometry m_root;
-  std::vector<ZEntry> m_entries;  ///< sorted by (code, vertex) (|V|)
+  detail::RoomyVector<ZEntry> m_entries;  ///< sorted by (code, vertex) (|V|)
   bool m_merged = false;
   std::vector<ZEntry> m_added;       ///< scratch of update(): the new entries, sorted (n')
   std::vector<std::size_t> m_at;     ///< scratch of update(): insertion points (n')
@@ -148,6 +178,11 @@ class SurfaceEmbedding {
   /// std::invalid_argument for bad indices or a model with another root cube or no leaf; the embedding is
   /// unchanged then.
   std::vector<int> update(const ObjectModel& new_model, const SurfaceEdit& edit);
+  /// The same, taking the edit's triangle list over instead of copying it (the edit is left valid but unspecified).
+  /// Kept vertices before the first removed one stay in place; the others move down in runs; the vertex-to-triangle
+  /// adjacency is counted while the triangles are validated; the composed rows that are kept stay where they are
+  /// or move in runs inside the current CSR. Equal bit for bit to the const& overload.
+  std::vector<int> update(const ObjectModel& new_model, SurfaceEdit&& edit);
   /// Moves to a new revision of the model with the same surface (refinement).
   void rebind(const ObjectModel& new_model);
 
@@ -157,27 +192,37 @@ class SurfaceEmbedding {
   [[nodiscard]] int last_reembedded() const { return m_last_reembedded; }
 
  private:
-  // Re-embeds the vertices flagged in `redo` (|V|; all when redo is empty) in m_tree. Every unflagged vertex must be
-  // regularly bound, and the adjacency must be built for m_triangles (fallback anchors).
-  void embed(const ObjectModel& model, const std::vector<char>& redo);
+  // Re-embeds the vertices listed in `redo` (ascending vertex indices) in m_tree, or all of them when `all` is set.
+  // Every other vertex must be regularly bound, and the adjacency must be built for m_triangles (fallback anchors).
+  void embed(const ObjectModel& model, std::span<const int> redo, bool all);
   // Composes every vertex through P into the CSR and keeps P's rows for the next update(). Vertex v with
   // reuse_from[v] >= 0 takes the current row of that (old) vertex with its DOFs renumbered by dof_map (old num_dofs),
-  // which the caller has shown to equal the row composed anew; empty reuse_from composes all anew.
+  // which the caller has shown to equal the row composed anew; empty reuse_from composes all anew. reuse_from must
+  // be increasing on the vertices that reuse a row (kept vertices keep their order): the kept rows then stay in the
+  // current CSR, moved in runs, and only the new rows are composed.
   void compose(const DofMap& P, std::span<const int> reuse_from, std::span<const int> dof_map);
+  // Validates `triangles` against `num_vertices` (throws as check_triangles does) and counts the corners at each
+  // vertex into m_next_tri_begin, the first step of build_adjacency(); touches no other member.
+  void count_corners(const std::vector<std::array<int32_t, 3>>& triangles, std::size_t num_vertices);
+  // Builds the vertex-to-triangle CSR of m_triangles from the counts of count_corners(m_triangles, |V|).
   void build_adjacency();
   void check_triangles(const std::vector<std::array<int32_t, 3>>& triangles, std::size_t num_vertices) const;
+  // Both update() overloads: takes the triangle list over from `take` (== &edit.triangles) when it is given, copies
+  // edit.triangles otherwise.
+  std::vector<int> apply(const ObjectModel& new_model, const SurfaceEdit& edit,
+                         std::vector<std::array<int32_t, 3>>* take);
 
   RootGeometry m_root;
   Octree m_tree;                                   ///< the tree of the model the vertices are bound to
-  std::vector<Vec3> m_rest;                        ///< rest positions, m (|V|)
-  std::vector<std::array<int32_t, 3>> m_triangles; ///< (|F|)
+  detail::RoomyVector<Vec3> m_rest;                ///< rest positions, m (|V|)
+  detail::RoomyVector<std::array<int32_t, 3>> m_triangles;  ///< (|F|)
   ZCurveList m_zcurve;                             ///< (|V|)
-  std::vector<VertexEmbedding> m_embedding;        ///< (|V|)
+  detail::RoomyVector<VertexEmbedding> m_embedding;  ///< (|V|)
   std::vector<int> m_begin;                        ///< CSR row starts of the composed weights (|V| + 1)
-  std::vector<int> m_dof;                          ///< DOF of each entry (nnz)
-  std::vector<double> m_weight;                    ///< weight of each entry, dimensionless (nnz)
+  detail::RoomyVector<int> m_dof;                  ///< DOF of each entry (nnz)
+  detail::RoomyVector<double> m_weight;            ///< weight of each entry, dimensionless (nnz)
   std::vector<int> m_tri_begin;                    ///< vertex-to-triangle CSR row starts (|V| + 1)
-  std::vector<int> m_tri;                          ///< incident triangles of each vertex, ascending (3 |F|)
+  detail::RoomyVector<int> m_tri;                  ///< incident triangles of each vertex, ascending (3 |F|)
   int m_num_dofs = 0;                              ///< DOFs of the bound model
   // The bound model's P and DOF nodes, kept so that update() can tell the leaves whose rows of P a new revision
   // leaves unchanged (up to DOF numbering) and keep their vertices' composed rows.
@@ -185,10 +230,15 @@ class SurfaceEmbedding {
   std::vector<int> m_slot_dof;                     ///< DOF of each entry of P (nnz(P))
   std::vector<double> m_slot_weight;               ///< weight of each entry of P, dimensionless (nnz(P))
   std::vector<std::uint64_t> m_dof_node;           ///< node_key() of each DOF's node (num_dofs)
-  // Scratch of compose(): the next CSR, swapped with the current one, so that an update allocates little.
+  // Scratch of compose(): the next row starts, swapped with the current ones (the entries are moved in place).
   std::vector<int> m_next_begin;                   ///< (|V| + 1)
-  std::vector<int> m_next_dof;                     ///< (nnz)
-  std::vector<double> m_next_weight;               ///< (nnz)
+  // Scratch of update(), kept from call to call so that a cut allocates little and faults in few fresh pages.
+  std::vector<int> m_next_tri_begin;               ///< corner counts, then the adjacency's row starts (|V| + 2)
+  std::vector<char> m_redo;                        ///< 1 for each vertex to re-embed (|V|)
+  std::vector<int> m_redo_list;                    ///< the vertices to re-embed, ascending (<= |V|)
+  std::vector<int> m_reuse_from;                   ///< old vertex whose composed row a vertex keeps, or -1 (|V|)
+  std::vector<int> m_new_dof;                      ///< compose(): DOFs of the rows composed anew (entries)
+  std::vector<double> m_new_weight;                ///< compose(): their weights, dimensionless (entries)
   int m_last_reembedded = 0;
 };
 

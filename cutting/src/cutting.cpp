@@ -4,6 +4,8 @@
 #include <chrono>
 #include <cmath>
 #include <numeric>
+#include <functional>
+#include <future>
 #include <optional>
 #include <stdexcept>
 #include <thread>
@@ -137,17 +139,25 @@ struct ModelWork {
   bool all_gone = false;                            ///< no material is left
   std::vector<int> fragment_leaves;                 ///< leaves of *before_fragments that the fragments held
   std::optional<sim::ObjectModel> before_fragments; ///< the split model, kept only when fragments go
-  sim::PreparedModel prepared;                      ///< the new revision, its state and its symbolic analysis
-  double ms_material_graph = 0.0, ms_refine = 0.0, ms_node_split = 0.0, ms_prepare = 0.0;
+  std::shared_ptr<const sim::ObjectModel> next;     ///< the new revision; null when no material is left
+  double ms_material_graph = 0.0, ms_refine = 0.0, ms_node_split = 0.0;
+  // The second phase, after model_ready: only read once the model thread has been joined.
+  std::string prepare_error;                        ///< why prepare_model failed; empty when it did not
+  sim::PreparedModel prepared;                      ///< *next's copy, its state and its symbolic analysis
+  bool have_prepared = false;                       ///< `prepared` holds the revision
+  double ms_prepare = 0.0;
 };
 
 // Stages 3 (material graph) and 4 (refine, node split, fragments), then the new revision's FEM system, carried-over
 // state and symbolic analysis (the solver part of stage 5), for the rest-space blades. Reads the simulator and M,
-// changes nothing. Throws StageFailure.
+// changes nothing. Calls model_ready() once everything but the preparation is in `w` (from then on the caller may
+// read those fields while the preparation runs), and skips the preparation when cancelled() says so. Throws
+// StageFailure.
 void run_model_stages(ModelWork& w, const std::vector<sim::TriMesh>& blades,
                       const std::shared_ptr<const sim::MaterialGraph>& material_ptr,
                       const sim::ObjectModel& model, const sim::Simulator& simulator, const CutOptions& options,
-                      double inscribed_radius) {
+                      double inscribed_radius, const std::function<void()>& model_ready,
+                      const std::function<bool()>& cancelled) {
   const sim::RootGeometry& root = model.root();
   const sim::MaterialGraph& material = *material_ptr;
   // ---- 3. material_graph -------------------------------------------------------------------------------------------
@@ -239,12 +249,15 @@ void run_model_stages(ModelWork& w, const std::vector<sim::TriMesh>& blades,
     }
   }
   w.graph = std::move(graph);
+  if (!w.all_gone) w.next = std::make_shared<const sim::ObjectModel>(std::move(next));
   w.ms_node_split = ms_since(t0);
+  model_ready();
 
   // ---- 5. (the solver part) -----------------------------------------------------------------------------------------
-  if (w.all_gone) return;
+  if (w.all_gone || cancelled()) return;
   t0 = Clock::now();
-  w.prepared = simulator.prepare_model(std::move(next), true);
+  w.prepared = simulator.prepare_model(*w.next, true);  // a copy: the caller reads *w.next meanwhile
+  w.have_prepared = true;
   w.ms_prepare = ms_since(t0);
 }
 
@@ -346,21 +359,34 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     out.ms.back_transform = ms_since(t0);
 
     // Stages 3 and 4 and the new revision's solver preparation read only M, T, the state and the rest-space blades,
-    // never S: they run on a second thread (the model thread) while this one cuts S (stage 2). Nothing is committed
-    // until both are done, so the cut stays one transaction; the results do not depend on the interleaving.
-    const auto model_stages = [&](const std::vector<sim::TriMesh>& blades) {
-      ModelWork w;
+    // never S: they run on a second thread (the model thread) while this one cuts S (stage 2). Once the new revision
+    // is known, that thread prepares its FEM system and symbolic analysis while this one updates the embedding.
+    // Nothing is committed before both are done, and the results do not depend on the interleaving.
+    const auto model_stages = [&](ModelWork& w, const std::vector<sim::TriMesh>& blades, std::promise<void>* ready,
+                                  const std::function<bool()>& cancelled) {
+      bool signalled = false;
+      const auto signal = [&] {
+        if (signalled) return;
+        signalled = true;
+        if (ready) ready->set_value();
+      };
       try {
-        run_model_stages(w, blades, object.graph, model, simulator, options, request.inscribed_radius);
-      } catch (const StageFailure& e) {
-        w.error = e.what();
+        run_model_stages(w, blades, object.graph, model, simulator, options, request.inscribed_radius, signal,
+                         cancelled);
       } catch (const std::exception& e) {
-        w.error = std::string("unexpected error: ") + e.what();
+        std::string why =
+            dynamic_cast<const StageFailure*>(&e) ? e.what() : std::string("unexpected error: ") + e.what();
+        (signalled ? w.prepare_error : w.error) = std::move(why);
       }
-      return w;
+      signal();
     };
     ModelWork work;
-    std::jthread model_thread([&, blades = rest_blades] { work = model_stages(blades); });
+    std::promise<void> model_ready;
+    std::future<void> model_known = model_ready.get_future();
+    // Its destructor asks it to skip the preparation and joins it, on every way out of this function.
+    std::jthread model_thread([&, blades = rest_blades](std::stop_token stop) {
+      model_stages(work, blades, &model_ready, [stop] { return stop.stop_requested(); });
+    });
 
     // ---- 2. surface ------------------------------------------------------------------------------------------------
     t0 = Clock::now();
@@ -404,9 +430,14 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     out.ms.surface = ms_since(t0);
     if (!surface_changed) track.mesh = object.surface;
 
-    model_thread.join();
+    model_known.wait();
     // A perturbed blade removes material where it now is: the model stages run again, here, with the blades used.
-    if (out.perturbed > 0) work = model_stages(rest_blades);
+    if (out.perturbed > 0) {
+      model_thread.request_stop();
+      model_thread.join();
+      work = ModelWork{};
+      model_stages(work, rest_blades, nullptr, [] { return false; });
+    }
     if (!work.error.empty()) throw StageFailure(work.error);
     out.tets_removed = work.tets_removed;
     out.leaves_refined = work.leaves_refined;
@@ -474,12 +505,24 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     }
     edit.inserted_rest.assign(track.mesh.vertices.begin() + std::ptrdiff_t(kept), track.mesh.vertices.end());
     edit.triangles = track.mesh.triangles;
-    embedding.update(work.prepared.model(), edit);  // strong guarantee: unchanged when it throws
+    embedding.update(*work.next, std::move(edit));  // strong guarantee: unchanged when it throws
     out.ms.embedding = ms_since(t0);
 
+    if (model_thread.joinable()) model_thread.join();
     t0 = Clock::now();
-    simulator.adopt(std::move(work.prepared));
-    out.ms.solver_update = work.ms_prepare + ms_since(t0);
+    if (work.have_prepared) {
+      simulator.adopt(std::move(work.prepared));
+      out.ms.solver_update = work.ms_prepare + ms_since(t0);
+    } else {
+      // The preparation failed on the model thread (it only allocates and analyses, so it should not): as
+      // set_model and refresh_solver, whose failed analysis the next step handles.
+      simulator.set_model(*work.next);
+      try {
+        simulator.refresh_solver();
+      } catch (const std::exception&) {
+      }
+      out.ms.solver_update = ms_since(t0);
+    }
 
     // Commit the object.
     object.surface = std::move(track.mesh);

@@ -429,11 +429,18 @@ void verify_self_intersections(const sim::TriMesh& out, const std::vector<int32_
   };
   for (std::size_t i = 0; i < changed.size(); ++i) add(changed[i], whole[i] ? 0 : 1);
   for (const int32_t f : neighbours) add(f, 0);
+  // The changed faces against all of them (pairs of unchanged faces are never enumerated); a pair of two changed
+  // faces comes twice and is tested once, and a face against itself is skipped.
+  std::vector<Box> changed_boxes;
+  for (const Box& x : boxes) {
+    if (x.info() & 1) changed_boxes.push_back(x);
+  }
   bool found = false;
   std::array<int32_t, 2> best{};
-  CGAL::box_self_intersection_d(boxes.begin(), boxes.end(), [&](const Box& x, const Box& y) {
-    if ((x.info() & 1) == 0 && (y.info() & 1) == 0) return;
+  CGAL::box_intersection_d(changed_boxes.begin(), changed_boxes.end(), boxes.begin(), boxes.end(),
+                           [&](const Box& x, const Box& y) {
     const int32_t f = x.info() / 2, g = y.info() / 2;
+    if (f == g || ((y.info() & 1) != 0 && g < f)) return;
     if (triangles_intersect(out, out.triangles[static_cast<std::size_t>(f)],
                             out.triangles[static_cast<std::size_t>(g)])) {
       const std::array<int32_t, 2> pair{std::min(f, g), std::max(f, g)};
@@ -909,12 +916,14 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
   std::vector<int32_t> old_to_new(static_cast<std::size_t>(nv));
   const auto kept_count = static_cast<int32_t>(nv - static_cast<int32_t>(result.removed_vertices.size()));
   sim::TriMesh& out = result.mesh;
-  out.vertices.resize(static_cast<std::size_t>(kept_count));
+  // Reserved once for all (kept, then inserted), and appended to without zero-filling first.
+  out.vertices.reserve(static_cast<std::size_t>(kept_count) +
+                       static_cast<std::size_t>(std::count(used_new.begin(), used_new.end(), char(1))));
   {
     int32_t from = 0, shift = 0;
     const auto copy_range = [&](int32_t to) {  // kept vertices [from, to)
       std::iota(old_to_new.begin() + from, old_to_new.begin() + to, from - shift);
-      std::copy(surface.vertices.begin() + from, surface.vertices.begin() + to, out.vertices.begin() + (from - shift));
+      out.vertices.insert(out.vertices.end(), surface.vertices.begin() + from, surface.vertices.begin() + to);
     };
     for (const int v : result.removed_vertices) {
       copy_range(v);
@@ -925,7 +934,6 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
     copy_range(nv);
   }
   std::vector<int32_t> new_to_out(used_new.size(), -1);
-  out.vertices.reserve(static_cast<std::size_t>(kept_count) + used_new.size());
   for (std::size_t k = 0; k < used_new.size(); ++k) {
     if (!used_new[k]) continue;
     new_to_out[k] = static_cast<int32_t>(out.vertices.size());
@@ -948,16 +956,17 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
   {
     // The untouched faces [from, to), remapped (copied as they are when no vertex went).
     const auto copy_faces = [&](int32_t from, int32_t to) {
-      // Appended without zero-filling first (the capacity is reserved).
-      for (int32_t f = from; f < to; ++f) result.triangle_origin.push_back(f);
-      if (result.removed_vertices.empty()) {
-        out.triangles.insert(out.triangles.end(), surface.triangles.begin() + from, surface.triangles.begin() + to);
-        return;
-      }
-      for (int32_t f = from; f < to; ++f) {
-        const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
-        out.triangles.push_back({old_to_new[static_cast<std::size_t>(t[0])], old_to_new[static_cast<std::size_t>(t[1])],
-                                 old_to_new[static_cast<std::size_t>(t[2])]});
+      // Copied in one piece, then remapped in place (the capacity is reserved: nothing moves).
+      const std::size_t at = out.triangles.size();
+      result.triangle_origin.resize(at + static_cast<std::size_t>(to - from));
+      std::iota(result.triangle_origin.begin() + static_cast<std::ptrdiff_t>(at), result.triangle_origin.end(), from);
+      out.triangles.insert(out.triangles.end(), surface.triangles.begin() + from, surface.triangles.begin() + to);
+      if (result.removed_vertices.empty()) return;
+      const int32_t first_removed = result.removed_vertices.front();  // ascending: below it, indices stay
+      for (std::size_t i = at; i < out.triangles.size(); ++i) {
+        for (int32_t& v : out.triangles[i]) {
+          if (v > first_removed) v = old_to_new[static_cast<std::size_t>(v)];
+        }
       }
     };
     int32_t next_face = 0;

@@ -8,6 +8,7 @@
 #include <future>
 #include <optional>
 #include <stdexcept>
+#include <system_error>
 #include <thread>
 
 #include "octocut/cutting/blade.hpp"
@@ -383,10 +384,16 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     ModelWork work;
     std::promise<void> model_ready;
     std::future<void> model_known = model_ready.get_future();
-    // Its destructor asks it to skip the preparation and joins it, on every way out of this function.
-    std::jthread model_thread([&, blades = rest_blades](std::stop_token stop) {
-      model_stages(work, blades, &model_ready, [stop] { return stop.stop_requested(); });
-    });
+    // Its destructor asks it to skip the preparation and joins it, on every way out of this function. Without a
+    // thread to be had, the model stages run here first.
+    std::jthread model_thread;
+    try {
+      model_thread = std::jthread([&, blades = rest_blades](std::stop_token stop) {
+        model_stages(work, blades, &model_ready, [stop] { return stop.stop_requested(); });
+      });
+    } catch (const std::system_error&) {
+      model_stages(work, rest_blades, &model_ready, [] { return false; });
+    }
 
     // ---- 2. surface ------------------------------------------------------------------------------------------------
     t0 = Clock::now();
@@ -434,7 +441,7 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     // A perturbed blade removes material where it now is: the model stages run again, here, with the blades used.
     if (out.perturbed > 0) {
       model_thread.request_stop();
-      model_thread.join();
+      if (model_thread.joinable()) model_thread.join();
       work = ModelWork{};
       model_stages(work, rest_blades, nullptr, [] { return false; });
     }

@@ -37,25 +37,30 @@ struct Exact_field_selector<double> {
 template <>
 class Real_embeddable_traits<Quotient<Mpzf>>
     : public INTERN_QUOTIENT::Real_embeddable_traits_quotient_base<Quotient<Mpzf>> {
-  // An interval of num or den that num / den may use: finite, and not touching the underflow range unless exact 0.
-  static bool usable(const std::pair<double, double>& i) {
-    const auto fine = [](double x) { return x == 0.0 || std::isnormal(x); };
-    return fine(i.first) && fine(i.second) && (i.first == i.second || (i.first != 0.0 && i.second != 0.0));
+  // Whether num / den may be converted part by part: both within double's normal range (num may be exactly 0) and
+  // den's interval clear of 0.
+  static bool in_range(const Quotient<Mpzf>& q) {
+    const auto usable = [](const std::pair<double, double>& i) {
+      const auto fine = [](double x) { return x == 0.0 || std::isnormal(x); };
+      return fine(i.first) && fine(i.second) && (i.first == i.second || (i.first != 0.0 && i.second != 0.0));
+    };
+    const std::pair<double, double> d = q.denominator().to_interval();
+    return usable(q.numerator().to_interval()) && usable(d) && d.first != 0.0;
   }
   static mpq_class exact(const Quotient<Mpzf>& q) { return mpq_class(q.numerator()) / mpq_class(q.denominator()); }
 
  public:
   struct To_interval : public CGAL::cpp98::unary_function<Quotient<Mpzf>, std::pair<double, double>> {
     std::pair<double, double> operator()(const Quotient<Mpzf>& q) const {
-      const std::pair<double, double> n = q.numerator().to_interval(), d = q.denominator().to_interval();
-      if (usable(n) && usable(d) && d.first != 0.0) return (Interval_nt<>(n) / Interval_nt<>(d)).pair();
+      if (in_range(q)) {
+        return (Interval_nt<>(q.numerator().to_interval()) / Interval_nt<>(q.denominator().to_interval())).pair();
+      }
       return CGAL::to_interval(exact(q));
     }
   };
   struct To_double : public CGAL::cpp98::unary_function<Quotient<Mpzf>, double> {
     double operator()(const Quotient<Mpzf>& q) const {
-      const std::pair<double, double> n = q.numerator().to_interval(), d = q.denominator().to_interval();
-      if (usable(n) && usable(d) && d.first != 0.0) return q.numerator().to_double() / q.denominator().to_double();
+      if (in_range(q)) return q.numerator().to_double() / q.denominator().to_double();
       return exact(q).get_d();
     }
   };

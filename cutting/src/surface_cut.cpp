@@ -415,7 +415,7 @@ void verify_self_intersections(const sim::TriMesh& out, const std::vector<int32_
                                const std::vector<char>& whole,
                                const std::vector<int32_t>& neighbours) {
   using Box = CGAL::Box_intersection_d::Box_with_info_d<double, 3, int32_t>;
-  std::vector<Box> boxes;
+  std::vector<Box> boxes, changed_boxes;  // all of them; those of the changed triangles
   boxes.reserve(changed.size() + neighbours.size());
   // A box's info is 2 f + 1 for a changed triangle f, 2 f for a neighbour.
   const auto add = [&](int32_t f, int32_t changed_bit) {
@@ -426,15 +426,12 @@ void verify_self_intersections(const sim::TriMesh& out, const std::vector<int32_
     const Vec3 lo = a.cwiseMin(b).cwiseMin(c), hi = a.cwiseMax(b).cwiseMax(c);
     double l[3] = {lo.x(), lo.y(), lo.z()}, h[3] = {hi.x(), hi.y(), hi.z()};
     boxes.emplace_back(Box(l, h, 2 * f + changed_bit));
+    if (changed_bit) changed_boxes.push_back(boxes.back());
   };
   for (std::size_t i = 0; i < changed.size(); ++i) add(changed[i], whole[i] ? 0 : 1);
   for (const int32_t f : neighbours) add(f, 0);
   // The changed faces against all of them (pairs of unchanged faces are never enumerated); a pair of two changed
   // faces comes twice and is tested once, and a face against itself is skipped.
-  std::vector<Box> changed_boxes;
-  for (const Box& x : boxes) {
-    if (x.info() & 1) changed_boxes.push_back(x);
-  }
   bool found = false;
   std::array<int32_t, 2> best{};
   CGAL::box_intersection_d(changed_boxes.begin(), changed_boxes.end(), boxes.begin(), boxes.end(),

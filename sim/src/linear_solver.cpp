@@ -67,17 +67,7 @@ class CholmodFactor {
       for (int t = p[block * k]; t < p[block * k + 1]; t += block) bi.push_back(i[t] / block);
     }
     bp[std::size_t(nb)] = int(bi.size());
-    cholmod_sparse g{};
-    g.nrow = g.ncol = std::size_t(nb);
-    g.nzmax = std::max<std::size_t>(bi.size(), 1);
-    g.p = bp.data();
-    g.i = bi.data();
-    g.stype = -1;
-    g.itype = CHOLMOD_INT;
-    g.xtype = CHOLMOD_PATTERN;
-    g.dtype = CHOLMOD_DOUBLE;
-    g.sorted = 1;
-    g.packed = 1;
+    cholmod_sparse g = symmetric(nb, std::max<std::size_t>(bi.size(), 1), bp.data(), bi.data(), nullptr);
 
     // Ordering and supernodal symbolic factorisation of the block graph. Supernode amalgamation thresholds count
     // columns: scaled to blocks so that the scalar supernodes come out about as wide as a scalar analysis makes them.
@@ -123,22 +113,26 @@ class CholmodFactor {
     m_L = nullptr;
   }
 
-  // A view of A (compressed, sorted, int indices) as a symmetric CHOLMOD matrix whose lower triangle is read.
-  static cholmod_sparse view(const SpMat& A) {
+  // A square, compressed, sorted CSC matrix with int indices (n columns, nzmax entries) as a symmetric CHOLMOD
+  // matrix whose lower triangle is read; a pattern when x is null.
+  static cholmod_sparse symmetric(int n, std::size_t nzmax, const int* p, const int* i, const double* x) {
     cholmod_sparse a{};
-    a.nrow = std::size_t(A.rows());
-    a.ncol = std::size_t(A.cols());
-    a.nzmax = std::size_t(A.nonZeros());
-    a.p = const_cast<int*>(A.outerIndexPtr());
-    a.i = const_cast<int*>(A.innerIndexPtr());
-    a.x = const_cast<double*>(A.valuePtr());
+    a.nrow = a.ncol = std::size_t(n);
+    a.nzmax = nzmax;
+    a.p = const_cast<int*>(p);
+    a.i = const_cast<int*>(i);
+    a.x = const_cast<double*>(x);
     a.stype = -1;
     a.itype = CHOLMOD_INT;
-    a.xtype = CHOLMOD_REAL;
+    a.xtype = x ? CHOLMOD_REAL : CHOLMOD_PATTERN;
     a.dtype = CHOLMOD_DOUBLE;
     a.sorted = 1;
     a.packed = 1;
     return a;
+  }
+  // A view of A (compressed, sorted, int indices, square).
+  static cholmod_sparse view(const SpMat& A) {
+    return symmetric(int(A.cols()), std::size_t(A.nonZeros()), A.outerIndexPtr(), A.innerIndexPtr(), A.valuePtr());
   }
 
   // True when A's pattern is made of full 3 x 3 blocks: columns 3k, 3k + 1, 3k + 2 hold the same rows, and these

@@ -390,6 +390,15 @@ void FemSystem::assemble_system(double mc, double kc, const ElementFrame& frame,
 
 // ---- Simulator -------------------------------------------------------------------------------------------------------
 
+namespace {
+// 1 for the DOFs a handle drives (num_dofs).
+std::vector<char> constrained_flags(const ObjectModel& m) {
+  std::vector<char> c(std::size_t(m.num_dofs()), 0);
+  for (int d = 0; d < m.num_dofs(); ++d) c[std::size_t(d)] = m.dof_handle()[std::size_t(d)] >= 0;
+  return c;
+}
+}  // namespace
+
 Simulator::Simulator(ObjectModel model, const SimulatorOptions& options)
     : m_model(std::move(model)), m_options(options) {
   if (!(options.dt > 0.0)) throw std::invalid_argument("Simulator: dt must be positive");
@@ -403,8 +412,7 @@ Simulator::~Simulator() = default;
 
 void Simulator::rebuild() {
   m_fem = std::make_unique<FemSystem>(m_model, *m_executor);
-  m_constrained.assign(std::size_t(m_model.num_dofs()), 0);
-  for (int d = 0; d < m_model.num_dofs(); ++d) m_constrained[std::size_t(d)] = m_model.dof_handle()[std::size_t(d)] >= 0;
+  m_constrained = constrained_flags(m_model);
   m_A = SpMat();
   m_pattern_analyzed = false;
   m_dv_prev = VecX::Zero(3 * m_model.num_dofs());
@@ -462,9 +470,7 @@ PreparedModel Simulator::prepare_model(ObjectModel model, bool analyze) const {
   p.state = transfer_state(m_model, m_state, model);
   p.model = std::make_unique<ObjectModel>(std::move(model));
   p.fem = std::make_unique<FemSystem>(*p.model, *p.serial);
-  p.constrained.assign(std::size_t(p.model->num_dofs()), 0);
-  for (int d = 0; d < p.model->num_dofs(); ++d)
-    p.constrained[std::size_t(d)] = p.model->dof_handle()[std::size_t(d)] >= 0;
+  p.constrained = constrained_flags(*p.model);
   p.solver = make_solver();
   if (analyze && p.model->num_dofs() > 0) {
     try {
@@ -482,7 +488,8 @@ void Simulator::adopt(PreparedModel prepared) {
   PreparedModel::Impl& p = *prepared.m_impl;
   if (int(p.state.x.size()) != p.model->num_dofs())
     throw std::invalid_argument("Simulator::adopt: the prepared state does not match its model");
-  // Nothing below throws (moves and swaps), so the simulator is either unchanged or fully switched.
+  VecX dv_prev = VecX::Zero(3 * p.model->num_dofs());  // the one allocation, before anything changes
+  // Nothing below throws (moves), so the simulator is either unchanged or fully switched.
   m_model = std::move(*p.model);
   m_state = std::move(p.state);
   m_fem = std::move(p.fem);
@@ -491,7 +498,7 @@ void Simulator::adopt(PreparedModel prepared) {
   m_solver = std::move(p.solver);
   m_A = SpMat();
   m_pattern_analyzed = p.analyzed;
-  m_dv_prev = VecX::Zero(3 * m_model.num_dofs());
+  m_dv_prev = std::move(dv_prev);
 }
 
 void Simulator::set_state(SimState state) {

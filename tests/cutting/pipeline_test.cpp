@@ -102,8 +102,9 @@ TEST(CutPipeline, PunchThroughASlabAtRest) {
     // Distance in xy from the blade's axis to the box, against the polygon's inradius (a conservative meet test).
     const double dx = std::max({b.min.x() - 0.02, 0.0, 0.02 - b.max.x()});
     const double dy = std::max({b.min.y() - 0.02, 0.0, 0.02 - b.max.y()});
-    if (std::hypot(dx, dy) < 0.9 * r * std::cos(std::numbers::pi / n))
+    if (std::hypot(dx, dy) < 0.9 * r * std::cos(std::numbers::pi / n)) {
       EXPECT_TRUE(m.edge()[std::size_t(e)] <= le * (1 + 1e-12) || m.tree().leaf(e).level == m.max_level()) << e;
+    }
   }
   // The cut object keeps simulating.
   for (int i = 0; i < 5; ++i) o.sim->step();

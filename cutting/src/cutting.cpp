@@ -125,6 +125,65 @@ std::vector<int> triangle_components(const sim::TriMesh& mesh, int& count) {
   return comp;
 }
 
+// SPEC §4 stage 2: B'_i cuts only the material of component i. Returns one flag per leaf of `model` (empty when
+// no leaf is flagged): the leaves whose rest boxes meet the rest-space blade, grouped by material connectivity
+// (face-connected leaves whose common face material crosses), and flagged when their group holds none of the
+// component's leaves. Such material lies under B'_i in rest space only: in the deformed state the blade never
+// touched it (a part folded or pushed away from where the component's transform puts the blade). When B'_i meets no
+// leaf of its own component, nothing is flagged and the cut is not restricted.
+std::vector<char> foreign_leaves(const sim::ObjectModel& model, const BladeVolume& blade,
+                                 const std::vector<int>& component) {
+  const sim::RootGeometry& root = model.root();
+  std::vector<int> reach;     // leaves under the blade (rest space)
+  std::vector<sim::Box3> box; // their rest boxes, m
+  for (int e = 0; e < model.num_elements(); ++e) {
+    const sim::Box3 b = root.cell_box(model.tree().leaf(e));
+    if (boxes_overlap(b, blade.bounds()) && blade.overlaps_box(b)) {
+      reach.push_back(e);
+      box.push_back(b);
+    }
+  }
+  std::vector<char> own(reach.size(), 0);  // in the component (both lists ascending)
+  bool all_own = true;
+  for (std::size_t i = 0; i < reach.size(); ++i) {
+    own[i] = std::binary_search(component.begin(), component.end(), reach[i]);
+    all_own = all_own && own[i];
+  }
+  if (all_own) return {};
+  UnionFind uf(int(reach.size()));
+  for (std::size_t i = 0; i < reach.size(); ++i) {
+    for (std::size_t j = i + 1; j < reach.size(); ++j) {
+      if (!boxes_overlap(box[i], box[j])) continue;
+      const auto face = sim::common_face(model.tree().leaf(reach[i]), model.tree().leaf(reach[j]), root);
+      if (face && model.material().face_connected(face->first, face->second)) uf.unite(int(i), int(j));
+    }
+  }
+  std::vector<char> legit(reach.size(), 0);  // per root
+  bool any_own = false;
+  for (std::size_t i = 0; i < reach.size(); ++i) {
+    if (!own[i]) continue;
+    legit[std::size_t(uf.find(int(i)))] = 1;
+    any_own = true;
+  }
+  if (!any_own) return {};
+  std::vector<char> foreign(std::size_t(model.num_elements()), 0);
+  bool any = false;
+  for (std::size_t i = 0; i < reach.size(); ++i) {
+    if (legit[std::size_t(uf.find(int(i)))]) continue;
+    foreign[std::size_t(reach[i])] = 1;
+    any = true;
+  }
+  if (!any) return {};
+  return foreign;
+}
+
+// Whether the rest point p lies in a leaf that `foreign` (from foreign_leaves) flags.
+bool in_foreign(const sim::ObjectModel& model, const std::vector<char>& foreign, const sim::Vec3& p) {
+  if (foreign.empty()) return false;
+  const auto at = model.embed(p);
+  return at && foreign[std::size_t(at->leaf)];
+}
+
 // A failure of one stage: the cut is skipped with this reason.
 struct StageFailure : std::runtime_error {
   using std::runtime_error::runtime_error;
@@ -155,6 +214,7 @@ struct ModelWork {
 // read those fields while the preparation runs), and skips the preparation when cancelled() says so. Throws
 // StageFailure.
 void run_model_stages(ModelWork& w, const std::vector<sim::TriMesh>& blades,
+                      const std::vector<std::vector<char>>& foreign,
                       const std::shared_ptr<const sim::MaterialGraph>& material_ptr,
                       const sim::ObjectModel& model, const sim::Simulator& simulator, const CutOptions& options,
                       double inscribed_radius, const std::function<void()>& model_ready,
@@ -166,9 +226,14 @@ void run_model_stages(ModelWork& w, const std::vector<sim::TriMesh>& blades,
   std::vector<int> dead;
   std::vector<sim::Box3> changed;
   std::vector<BladeVolume> rest_volumes;
-  for (const sim::TriMesh& b : blades) {
-    rest_volumes.emplace_back(b);
-    const std::vector<int> tets = tets_touched(material, rest_volumes.back());
+  for (std::size_t k = 0; k < blades.size(); ++k) {
+    rest_volumes.emplace_back(blades[k]);
+    std::vector<int> tets = tets_touched(material, rest_volumes.back());
+    // Only the tets of the blade's own component (by the leaf that holds their centroid).
+    std::erase_if(tets, [&](int t) {
+      const std::array<sim::Vec3, 4> p = material.tet(t);
+      return in_foreign(model, foreign[k], 0.25 * (p[0] + p[1] + p[2] + p[3]));
+    });
     if (tets.empty()) continue;
     sim::Box3 region{sim::Vec3::Constant(INFINITY), sim::Vec3::Constant(-INFINITY)};
     for (int t : tets) {
@@ -194,9 +259,13 @@ void run_model_stages(ModelWork& w, const std::vector<sim::TriMesh>& blades,
   auto meets_blade = [&](const sim::Cell& c) {
     if (c.level >= model.max_level() || !(root.cell_edge(c) > le)) return false;
     const sim::Box3 box = root.cell_box(c);
-    return std::any_of(rest_volumes.begin(), rest_volumes.end(), [&](const BladeVolume& bv) {
-      return boxes_overlap(box, bv.bounds()) && bv.overlaps_box(box);
-    });
+    for (std::size_t k = 0; k < rest_volumes.size(); ++k) {
+      const BladeVolume& bv = rest_volumes[k];
+      if (boxes_overlap(box, bv.bounds()) && bv.overlaps_box(box) &&
+          !in_foreign(model, foreign[k], 0.5 * (box.min + box.max)))
+        return true;
+    }
+    return false;
   };
   sim::ObjectModel next = !dead.empty() && graph->num_tets() > 0
                               ? model.refined_with_material(meets_blade, graph, changed, &w.leaves_refined)
@@ -329,6 +398,7 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     }
     out.components = int(groups.size());
     std::vector<sim::TriMesh> rest_blades;
+    std::vector<std::vector<char>> foreign;  // per rest blade: the leaves it must not cut (see foreign_leaves)
     for (const std::vector<int>& g : groups) {
       std::vector<sim::Vec3> rest, deformed;
       std::vector<double> weights;
@@ -355,6 +425,7 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
       for (std::size_t v = 0; v < rest_blade.vertices.size(); ++v)
         moved = std::max(moved, (rest_blade.vertices[v] - request.blade.vertices[v]).cwiseAbs().maxCoeff());
       if (moved <= 1e-12 * root.size) rest_blade = request.blade;
+      foreign.push_back(foreign_leaves(model, BladeVolume(rest_blade), g));
       rest_blades.push_back(std::move(rest_blade));
     }
     out.ms.back_transform = ms_since(t0);
@@ -372,7 +443,7 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
         if (ready) ready->set_value();
       };
       try {
-        run_model_stages(w, blades, object.graph, model, simulator, options, request.inscribed_radius, signal,
+        run_model_stages(w, blades, foreign, object.graph, model, simulator, options, request.inscribed_radius, signal,
                          cancelled);
       } catch (const std::exception& e) {
         std::string why =
@@ -408,9 +479,16 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     SurfaceCutOptions sopt;
     sopt.verify = options.verify;
     sopt.check_blade_self_intersection = false;  // blades are checked when loaded (or built convex)
-    for (sim::TriMesh& b : rest_blades) {
+    // S checked once, and changed since only by verified cuts (which check every changed face against its
+    // neighbours), stays free of self-intersections: CGAL need not check it again.
+    sopt.check_surface_self_intersection = !object.surface_checked;
+    for (std::size_t k = 0; k < rest_blades.size(); ++k) {
+      sim::TriMesh& b = rest_blades[k];
       const sim::TriMesh& current = surface_changed ? track.mesh : object.surface;
       if (current.triangles.empty()) break;
+      sopt.removable = nullptr;
+      if (!foreign[k].empty())
+        sopt.removable = [&model, &f = foreign[k]](const sim::Vec3& p) { return !in_foreign(model, f, p); };
       SurfaceCutResult r = cut_surface(current, b, sopt);
       // A degenerate configuration that the boolean refuses (a blade edge through a surface edge at a point, say)
       // is retried with the blade translated by 1e-9, then 1e-7, of its size along a fixed generic direction:
@@ -535,6 +613,7 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     object.surface = std::move(track.mesh);
     object.cut_faces = std::move(track.cut_face);
     object.graph = std::move(work.graph);
+    object.surface_checked = object.surface_checked && options.verify;
     return finish("ok", "");
   } catch (const StageFailure& e) {
     return finish("skipped", e.what());

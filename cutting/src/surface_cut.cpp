@@ -15,6 +15,8 @@
 //     direction as that P face's, and discarded when the opposite halfedge does; conflicting votes fail the cut. A
 //     region without votes is discarded when it lies on P (coplanar), and otherwise kept when an exact ray-parity
 //     test (axis rays, orientation predicates on S's input coordinates, retried on grazing rays) puts it inside S.
+//     Where options.removable rejects a region's test point, a P region is kept and a blade region without votes is
+//     discarded (the pipeline's restriction of B'_i to the material of component i).
 //  4. The kept pieces are stitched back into S: P's original vertices keep their indices, new vertices are matched
 //     between the two meshes by identical coordinates. The result is verified locally (verify_local and
 //     verify_self_intersections), and V(S) - V(S') is summed over the changed faces only.
@@ -675,7 +677,7 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
     visitor.origin = &origin;
     visitor.b_origin = &b_origin;
     PMP::corefine(pmesh, bmesh,
-                  PMP::parameters::edge_is_constrained_map(p_constrained).visitor(visitor).throw_on_self_intersection(true),
+                  PMP::parameters::edge_is_constrained_map(p_constrained).visitor(visitor).throw_on_self_intersection(options.check_surface_self_intersection),
                   PMP::parameters::edge_is_constrained_map(b_constrained));
   }
 
@@ -732,11 +734,15 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
       if (d2 > eps2) {
         const CGAL::Bounded_side side = inside_blade(q);
         p_keep[static_cast<std::size_t>(r)] = side == CGAL::ON_BOUNDED_SIDE ? 0 : 1;
-        continue;
+      } else {
+        const auto [closest, primitive] = b_tree.closest_point_and_primitive(q);
+        const FI g = primitive;
+        p_keep[static_cast<std::size_t>(r)] = s_normal(origin[at]).dot(b_normal(b_origin[g])) > 0.0 ? 0 : 1;
       }
-      const auto [closest, primitive] = b_tree.closest_point_and_primitive(q);
-      const FI g = primitive;
-      p_keep[static_cast<std::size_t>(r)] = s_normal(origin[at]).dot(b_normal(b_origin[g])) > 0.0 ? 0 : 1;
+      // Material the caller does not let this blade remove stays.
+      if (!p_keep[static_cast<std::size_t>(r)] && options.removable && !options.removable(to_vec(q))) {
+        p_keep[static_cast<std::size_t>(r)] = 1;
+      }
     }
   }
   const auto p_kept = [&](FI f) { return f != Mesh::null_face() && p_keep[static_cast<std::size_t>(p_region[f])] != 0; };
@@ -803,6 +809,7 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
       static constexpr std::array<std::array<double, 3>, 3> kWeights{
           {{1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0}, {0.2913, 0.3527, 0.3560}, {0.6181, 0.2011, 0.1808}}};
       Side side = Side::degenerate;
+      Point at(0.0, 0.0, 0.0);  // the point that decided
       std::vector<FI> tries{rep[static_cast<std::size_t>(r)]};
       for (std::size_t i = 0; i < faces.size() && tries.size() < 8; i += std::max<std::size_t>(1, faces.size() / 7)) {
         tries.push_back(faces[i]);
@@ -815,6 +822,7 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
                         w[0] * p[0].z() + w[1] * p[1].z() + w[2] * p[2].z());
           if (!patch.empty() && p_tree->squared_distance(q) <= eps2) continue;
           side = point_in_surface(surface, q);
+          at = q;
           if (side == Side::inside || side == Side::outside) break;
         }
         if (side == Side::inside || side == Side::outside) break;
@@ -822,7 +830,8 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
       if (side != Side::inside && side != Side::outside) {
         throw CutFailure{"cannot decide whether blade region " + std::to_string(r) + " is inside the surface"};
       }
-      b_keep[static_cast<std::size_t>(r)] = side == Side::inside ? 1 : 0;
+      b_keep[static_cast<std::size_t>(r)] =
+          side == Side::inside && (!options.removable || options.removable(to_vec(at))) ? 1 : 0;
     }
   }
 

@@ -318,6 +318,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
     cut_object.surface = std::move(object->surface);
     cut_object.cut_faces.assign(cut_object.surface.triangles.size(), 0);
     cut_object.graph = object->graph;
+    cut_object.surface_checked = true;  // load_mesh rejects a self-intersecting S; a box cannot intersect itself
     const sim::TriMesh& surface = cut_object.surface;
     for (std::size_t i = 0; i < scene.tools.size(); ++i)
       if (scene.tools[i].collide)

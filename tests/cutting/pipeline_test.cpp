@@ -12,6 +12,7 @@
 #include "octocut/sim/primitives.hpp"
 #include "octocut/sim/surface_check.hpp"
 #include "../common/shapes.hpp"
+#include "test_meshes.hpp"
 #include "watertight.hpp"
 
 namespace octocut {
@@ -302,6 +303,125 @@ TEST(CutPipeline, LooseHalfIsRemovedAsAFragment) {
       EXPECT_EQ(count, 2);
     }
   }
+}
+
+TEST(CutPipeline, BladeCutsOnlyTheMaterialOfItsOwnComponent) {
+  // Two 21 x 21 x 3 mm slabs in one object, 3 mm apart (z in [0, 3] and [6, 9] mm, one empty 3 mm cell layer
+  // between them). The upper slab is pushed 20 mm up, and a punch from z = -2 to 8 mm goes through the lower slab
+  // only. The lower slab is at rest, so its transform is the identity and B' reaches into the upper slab's rest
+  // place: restricted to its component (SPEC §4 stage 2), the cut leaves the upper slab untouched.
+  const Box3 lower{Vec3(0, 0, 0), Vec3(0.021, 0.021, 0.003)};
+  const Box3 upper{Vec3(0, 0, 0.006), Vec3(0.021, 0.021, 0.009)};
+  sim::TetMesh tets = sim::box_tet_mesh(lower, 0.001);
+  {
+    const sim::TetMesh u = sim::box_tet_mesh(upper, 0.001);
+    const auto offset = int32_t(tets.vertices.size());
+    tets.vertices.insert(tets.vertices.end(), u.vertices.begin(), u.vertices.end());
+    for (auto t : u.tets) {
+      for (int32_t& v : t) v += offset;
+      tets.tets.push_back(t);
+    }
+  }
+  Object o;
+  o.cut.graph = std::make_shared<sim::MaterialGraph>(std::move(tets));
+  o.cut.surface = test::merged(sim::closed_box_grid(lower, 8), sim::closed_box_grid(upper, 8));
+  o.cut.cut_faces.assign(o.cut.surface.triangles.size(), 0);
+  o.cut.surface_checked = true;
+  sim::OctreeSpec spec;
+  spec.root = {Vec3(-0.003, -0.003, -0.003), 0.024};
+  spec.base_level = 3;  // 3 mm cells, their faces at z = 0, 3, 6, 9 mm
+  spec.max_level = 5;
+  sim::MaterialParams mp;
+  mp.young_modulus = 1e5;
+  mp.poisson_ratio = 0.3;
+  mp.density = 1000.0;
+  sim::SimulatorOptions so;
+  so.dt = 1e-3;
+  so.gravity = Vec3::Zero();
+  so.threads = 1;
+  o.sim = std::make_unique<sim::Simulator>(
+      sim::ObjectModel::build(spec, o.cut.graph, mp, {{{Vec3(-1, -1, -1), Vec3(0.004, 1, 1)}, {}}}), so);
+  o.emb = std::make_unique<sim::SurfaceEmbedding>(o.sim->model(), o.cut.surface.vertices, o.cut.surface.triangles);
+  int count = 0;
+  sim::element_components(o.sim->model(), count);
+  ASSERT_EQ(count, 2);
+  sim::SimState st = o.sim->state();
+  for (std::size_t d = 0; d < st.x.size(); ++d)
+    if (o.sim->model().dofs().dof_rest[d].z() > 0.0045) st.x[d].z() += 0.02;
+  o.sim->set_state(st);
+  const sim::TriMesh s0 = o.cut.surface;
+  const int upper_tets0 = [&] {
+    int n = 0;
+    for (int t = 0; t < o.cut.graph->num_tets_total(); ++t)
+      n += o.cut.graph->alive(t) && o.cut.graph->tet(t)[0].z() > 0.0045;
+    return n;
+  }();
+
+  const double r = 0.002;
+  const int n = 32;
+  cutting::CutOptions opt;
+  opt.fragments = cutting::FragmentPolicy::none;
+  const auto out = cut(o, prism(Vec3(0.0105, 0.0105, 0.003), r, 0.01, n), r * std::cos(std::numbers::pi / n), opt);
+  ASSERT_EQ(out.status, "ok") << out.reason;
+  EXPECT_EQ(out.components, 1);
+  // Only the lower slab's prism goes (unrestricted, 2 mm of the upper slab would go too).
+  const double expect = prism_area(r, n) * 0.003;
+  EXPECT_NEAR(out.removed_volume, expect, 1e-9 * expect);
+  expect_watertight(o.cut.surface, "surface");
+  EXPECT_EQ(euler_characteristic(o.cut.surface), 2);  // a torus (0) and the untouched upper box (2)
+  for (std::size_t f = 0; f < o.cut.surface.triangles.size(); ++f) {
+    if (!o.cut.cut_faces[f]) continue;
+    for (int32_t v : o.cut.surface.triangles[f]) EXPECT_LT(o.cut.surface.vertices[std::size_t(v)].z(), 0.0045);
+  }
+  // The upper slab bounds the same solid as before (the boolean may split its faces along the blade's contour, but
+  // keeps every piece), and its tets are all there.
+  sim::TriMesh top;
+  std::map<int32_t, int32_t> index;
+  for (const auto& t : o.cut.surface.triangles) {
+    if (o.cut.surface.vertices[std::size_t(t[0])].z() < 0.0045) continue;
+    std::array<int32_t, 3> u{};
+    for (int k = 0; k < 3; ++k) {
+      const auto [it, added] = index.emplace(t[std::size_t(k)], int32_t(top.vertices.size()));
+      if (added) top.vertices.push_back(o.cut.surface.vertices[std::size_t(t[std::size_t(k)])]);
+      u[std::size_t(k)] = it->second;
+    }
+    top.triangles.push_back(u);
+  }
+  expect_watertight(top, "upper slab");
+  EXPECT_NEAR(sim::signed_volume(top), 0.021 * 0.021 * 0.003, 1e-12 * 0.021 * 0.021 * 0.003);
+  for (const Vec3& p : s0.vertices)
+    if (p.z() > 0.0045) EXPECT_NE(std::find(top.vertices.begin(), top.vertices.end(), p), top.vertices.end());
+  int upper_tets = 0;
+  for (int t = 0; t < o.cut.graph->num_tets_total(); ++t)
+    upper_tets += o.cut.graph->alive(t) && o.cut.graph->tet(t)[0].z() > 0.0045;
+  EXPECT_EQ(upper_tets, upper_tets0);
+  EXPECT_GT(out.tets_removed, 0);
+  // The upper slab's leaves were not refined: none of them is finer than the base level.
+  const sim::ObjectModel& m = o.sim->model();
+  for (int e = 0; e < m.num_elements(); ++e)
+    if (m.root().cell_box(m.tree().leaf(e)).min.z() > 0.0045) EXPECT_EQ(m.tree().leaf(e).level, 3);
+  EXPECT_EQ(m.dofs().check_invariants(), "");
+}
+
+TEST(CutPipeline, CheckedSurfaceCutsAsAnUncheckedOne) {
+  // An object whose S is known valid skips CGAL's own check of S; the results are the same, and a cut without
+  // verification no longer vouches for S.
+  Object checked = make_object(kSlab, kSlabRoot, 4, 7, {left_handle()});
+  Object unchecked = make_object(kSlab, kSlabRoot, 4, 7, {left_handle()});
+  checked.cut.surface_checked = true;
+  const sim::TriMesh blade = prism(Vec3(0.02, 0.02, 0.002), 0.002, 0.01, 32);
+  const auto a = cut(checked, blade, 0.0019);
+  const auto b = cut(unchecked, blade, 0.0019);
+  ASSERT_EQ(a.status, "ok") << a.reason;
+  ASSERT_EQ(b.status, "ok") << b.reason;
+  EXPECT_EQ(checked.cut.surface.vertices, unchecked.cut.surface.vertices);
+  EXPECT_EQ(checked.cut.surface.triangles, unchecked.cut.surface.triangles);
+  EXPECT_TRUE(checked.cut.surface_checked);
+  EXPECT_FALSE(unchecked.cut.surface_checked);
+  cutting::CutOptions no_verify;
+  no_verify.verify = false;
+  ASSERT_EQ(cut(checked, prism(Vec3(0.01, 0.02, 0.002), 0.002, 0.01, 32), 0.0019, no_verify).status, "ok");
+  EXPECT_FALSE(checked.cut.surface_checked);
 }
 
 }  // namespace

@@ -343,6 +343,67 @@ TEST(SurfaceCut, BadInputFails) {
   EXPECT_NE(r.reason.find("ntersect"), std::string::npos) << r.reason;  // "Self-intersection ..." or "... intersect"
 }
 
+TEST(SurfaceCut, SurfaceCheckOffGivesTheSameResult) {
+  // Skipping CGAL's self-intersection check of S (for a surface known to be valid) changes nothing in the result.
+  const double e = 0.01, r = 0.001;
+  const TriMesh s = test::grid_cube(8, e);
+  const TriMesh b = cylinder(0.0053, 0.0047, r, 0.003, 0.012);
+  SurfaceCutOptions unchecked;
+  unchecked.check_surface_self_intersection = false;
+  const SurfaceCutResult a = cut_surface(s, b);
+  const SurfaceCutResult c = cut_surface(s, b, unchecked);
+  expect_valid_cut(s, c, "unchecked");
+  EXPECT_EQ(a.mesh.vertices, c.mesh.vertices);
+  EXPECT_EQ(a.mesh.triangles, c.mesh.triangles);
+  EXPECT_EQ(a.triangle_origin, c.triangle_origin);
+  EXPECT_EQ(a.removed_volume, c.removed_volume);
+}
+
+TEST(SurfaceCut, RemovableRestrictsTheCutToWhereItSaysYes) {
+  // Two 10 mm cubes stacked with a 2 mm gap, one punch through both. Restricted to z < 11 mm, only the lower cube
+  // gets a hole; the upper one stays exactly as it was (split along the blade's contour at most, same volume).
+  const double e = 0.01, r = 0.001;
+  TriMesh upper = test::grid_cube(4, e);
+  for (Vec3& p : upper.vertices) p.z() += 0.012;
+  const TriMesh s = test::merged(test::grid_cube(4, e), upper);
+  const TriMesh b = cylinder(0.0053, 0.0047, r, -0.002, 0.025);
+  const SurfaceCutResult both = cut_surface(s, b);
+  expect_valid_cut(s, both, "both");
+  EXPECT_NEAR(both.removed_volume, 2.0 * polygon_area(r, 32) * e, 1e-9 * e * e * e);
+
+  SurfaceCutOptions lower_only;
+  lower_only.removable = [](const Vec3& p) { return p.z() < 0.011; };
+  const SurfaceCutResult lower = cut_surface(s, b, lower_only);
+  expect_valid_cut(s, lower, "lower only");
+  EXPECT_NEAR(lower.removed_volume, polygon_area(r, 32) * e, 1e-9 * e * e * e);
+  EXPECT_NEAR(sim::signed_volume(lower.mesh), sim::signed_volume(s) - lower.removed_volume, 1e-15);
+  // No blade face (cut face) lies in the upper cube, and the upper cube keeps its volume: the vertices above
+  // z = 11 mm bound the same solid.
+  for (std::size_t f = 0; f < lower.mesh.triangles.size(); ++f) {
+    if (lower.triangle_origin[f] >= 0) continue;
+    for (const int32_t v : lower.mesh.triangles[f]) EXPECT_LT(lower.mesh.vertices[std::size_t(v)].z(), 0.011);
+  }
+  TriMesh top;
+  std::map<int32_t, int32_t> index;
+  for (const auto& t : lower.mesh.triangles) {
+    if (lower.mesh.vertices[std::size_t(t[0])].z() < 0.011) continue;
+    std::array<int32_t, 3> u{};
+    for (int k = 0; k < 3; ++k) {
+      const auto [it, added] = index.emplace(t[std::size_t(k)], int32_t(top.vertices.size()));
+      if (added) top.vertices.push_back(lower.mesh.vertices[std::size_t(t[std::size_t(k)])]);
+      u[std::size_t(k)] = it->second;
+    }
+    top.triangles.push_back(u);
+  }
+  EXPECT_NEAR(sim::signed_volume(top), e * e * e, 1e-15);
+  expect_watertight(top, "upper cube");
+
+  // Nowhere: nothing changes.
+  SurfaceCutOptions nowhere;
+  nowhere.removable = [](const Vec3&) { return false; };
+  EXPECT_EQ(cut_surface(s, b, nowhere).status, SurfaceCutStatus::no_op);
+}
+
 // The 10k meniscus in metres (file in mm).
 const TriMesh& meniscus() {
   static const TriMesh m = [] {

@@ -42,6 +42,10 @@ struct CutObject {
   std::vector<char> cut_faces;                       ///< 1 for a triangle of S that came from a blade (|F|)
   std::shared_ptr<const sim::MaterialGraph> graph;   ///< M; it must be the model's material source
   bool removed = false;                              ///< every element was cut away: nothing is simulated any more
+  bool surface_checked = false;  ///< S is known to be closed, manifold and free of self-intersections (checked when
+                                 ///< it was loaded). Cuts then skip CGAL's own self-intersection check of S near the
+                                 ///< blade; a cut with CutOptions::verify keeps this true (its changed faces are
+                                 ///< checked), one without sets it false. Leave it false for an unchecked S
 };
 
 /// One cut event: the blade where it is when the cut happens.

@@ -2,6 +2,7 @@
 // Stage 2 of the cut pipeline (SPEC §4): the exact, local surface boolean S' = S \ B'. Only the faces of S near the
 // blade take part in the CGAL corefinement; the result is stitched back into S. CGAL stays inside surface_cut.cpp.
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -17,6 +18,15 @@ struct SurfaceCutOptions {
                         ///< triangle, no self-intersection among changed faces and their neighbours)
   bool check_blade_self_intersection = true;  ///< reject a self-intersecting blade (0.3 ms for 128 triangles);
                                               ///< a caller that checked the blade once may turn this off
+  bool check_surface_self_intersection = true;  ///< reject S when its faces near the blade intersect each other
+                                                ///< (CGAL checks them during the corefinement: 0.5-0.8 ms at 50k
+                                                ///< vertices). Only a caller that knows S is free of
+                                                ///< self-intersections may turn this off: the corefinement is
+                                                ///< undefined on such input and may crash
+  /// Where the blade may remove material (rest point, m -> true); empty: everywhere. A region of S inside the
+  /// blade whose test point this rejects is kept, and so is S there: a region of the blade inside S whose test
+  /// point it rejects is left out. The cut pipeline restricts B'_i to the material of component i with it.
+  std::function<bool(const sim::Vec3&)> removable;
 };
 
 /// What cut_surface did.

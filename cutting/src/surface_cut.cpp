@@ -310,6 +310,32 @@ std::vector<int32_t> pinched_vertices(const sim::TriMesh& surface, const std::ve
   return pinched;
 }
 
+// The number of open fans that `faces` (face indices of `surface`) form around each vertex where they form any (the
+// vertices on their boundary).
+std::unordered_map<int32_t, int> open_fans(const sim::TriMesh& surface, const std::vector<int32_t>& faces) {
+  std::vector<std::array<int32_t, 3>> corners;  // (vertex, next, previous)
+  corners.reserve(faces.size() * 3);
+  for (const int32_t f : faces) {
+    const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
+    for (int k = 0; k < 3; ++k) corners.push_back({t[k], t[(k + 1) % 3], t[(k + 2) % 3]});
+  }
+  std::sort(corners.begin(), corners.end());
+  std::unordered_map<int32_t, int> fans;
+  for (std::size_t i = 0; i < corners.size();) {
+    std::size_t j = i;
+    while (j < corners.size() && corners[j][0] == corners[i][0]) ++j;
+    int open = 0;
+    for (std::size_t a = i; a < j; ++a) {
+      bool matched = false;
+      for (std::size_t b = i; b < j && !matched; ++b) matched = b != a && corners[b][2] == corners[a][1];
+      if (!matched) ++open;
+    }
+    if (open > 0) fans[corners[i][0]] = open;
+    i = j;
+  }
+  return fans;
+}
+
 // Local verification of S': `changed` are the triangles built from the corefined patch and the blade (indices into
 // out.triangles); `boundary_edges` are the directed edges (new indices) of the unchanged faces that border the
 // patch; `boundary_arcs[v]` is the number of fans the patch had around vertex v (new index), 0 when v was inside.
@@ -412,9 +438,12 @@ void verify_local(const sim::TriMesh& out, const std::vector<int32_t>& changed,
 
 // Self-intersections among the changed faces and between them and their unchanged neighbours: the faces of S kept
 // whole in the patch (`whole`, per entry of `changed`) and the faces outside it that share a vertex with it. Pairs of
-// unchanged faces are skipped (S had no self-intersection). Throws CutFailure naming the smallest pair found.
+// unchanged faces are skipped (S had no self-intersection), and so are pairs of faces without a constructed vertex
+// (see below; `constructed_inserted` flags the vertices from `first_inserted` on that are intersection points).
+// Throws CutFailure naming the smallest pair found.
 void verify_self_intersections(const sim::TriMesh& out, const std::vector<int32_t>& changed,
-                               const std::vector<char>& whole,
+                               const std::vector<char>& whole, int32_t first_inserted,
+                               const std::vector<char>& constructed_inserted,
                                const std::vector<int32_t>& neighbours) {
   using Box = CGAL::Box_intersection_d::Box_with_info_d<double, 3, int32_t>;
   std::vector<Box> boxes, changed_boxes;  // all of them; those of the changed triangles
@@ -430,7 +459,17 @@ void verify_self_intersections(const sim::TriMesh& out, const std::vector<int32_
     boxes.emplace_back(Box(l, h, 2 * f + changed_bit));
     if (changed_bit) changed_boxes.push_back(boxes.back());
   };
-  for (std::size_t i = 0; i < changed.size(); ++i) add(changed[i], whole[i] ? 0 : 1);
+  // Only a face with a constructed vertex (an intersection point, rounded to doubles) can take part in an
+  // intersection: two faces whose vertices are all input vertices of S or of the blade did not intersect before the
+  // rounding (S had no self-intersection, the blade none, and the corefinement splits S and the blade wherever they
+  // meet), and nothing moved them. The others count as unchanged.
+  const auto constructed = [&](int32_t f) {
+    const Tri& t = out.triangles[static_cast<std::size_t>(f)];
+    return std::any_of(t.begin(), t.end(), [&](int32_t v) {
+      return v >= first_inserted && constructed_inserted[static_cast<std::size_t>(v - first_inserted)] != 0;
+    });
+  };
+  for (std::size_t i = 0; i < changed.size(); ++i) add(changed[i], !whole[i] && constructed(changed[i]) ? 1 : 0);
   for (const int32_t f : neighbours) add(f, 0);
   // The changed faces against all of them (pairs of unchanged faces are never enumerated); a pair of two changed
   // faces comes twice and is tested once, and a face against itself is skipped.
@@ -546,9 +585,77 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
     if (shared == 0) patch.push_back(f);
     else if ((shared & 0xfc0u) == 0) near_faces.push_back(f);
   }
+  // Of the faces in G, CGAL gets only those that may touch the blade: a face is left out (`clear`) when, against
+  // every blade triangle whose grown box its box meets, one of the two triangles lies strictly on one side of the
+  // other's plane (by more than a bound on the rounding of the plane test). A clear face cannot touch the blade's
+  // surface, so it lies strictly inside or strictly outside the blade; it is classified below, without CGAL.
+  std::vector<int32_t> region = patch;  // the faces whose box meets G, ascending
+  {
+    struct BladeTriangle {
+      Vec3 lo, hi, n;    // grown box, m; normal (not unit), m^2
+      double d, tol;     // plane offset n.p, m^3; its rounding bound, m^3
+    };
+    double magnitude = 0.0;  // largest coordinate magnitude in play, m
+    magnitude = std::max(gmin.cwiseAbs().maxCoeff(), gmax.cwiseAbs().maxCoeff());
+    const double scale = (gmax - gmin).norm() + magnitude;  // m
+    const auto plane = [&](const Vec3& a, const Vec3& b, const Vec3& c, Vec3& n, double& d, double& tol) {
+      n = (b - a).cross(c - a);
+      d = n.dot(a);
+      tol = 1e-9 * n.norm() * scale;
+    };
+    std::vector<BladeTriangle> bts;
+    bts.reserve(blade.triangles.size());
+    for (const Tri& t : blade.triangles) {
+      const Vec3& a = blade.vertices[static_cast<std::size_t>(t[0])];
+      const Vec3& b = blade.vertices[static_cast<std::size_t>(t[1])];
+      const Vec3& c = blade.vertices[static_cast<std::size_t>(t[2])];
+      BladeTriangle bt;
+      bt.lo = a.cwiseMin(b).cwiseMin(c).array() - margin;
+      bt.hi = a.cwiseMax(b).cwiseMax(c).array() + margin;
+      plane(a, b, c, bt.n, bt.d, bt.tol);
+      bts.push_back(bt);
+    }
+    // Whether a, b, c lie strictly on one side of the plane n.x = d.
+    const auto one_side = [](const Vec3& n, double d, double tol, const Vec3& a, const Vec3& b, const Vec3& c) {
+      const double x = n.dot(a) - d, y = n.dot(b) - d, z = n.dot(c) - d;
+      return (x > tol && y > tol && z > tol) || (x < -tol && y < -tol && z < -tol);
+    };
+    std::vector<int32_t> touching;
+    for (const int32_t f : patch) {
+      const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
+      const Vec3& a = surface.vertices[static_cast<std::size_t>(t[0])];
+      const Vec3& b = surface.vertices[static_cast<std::size_t>(t[1])];
+      const Vec3& c = surface.vertices[static_cast<std::size_t>(t[2])];
+      const Vec3 lo = a.cwiseMin(b).cwiseMin(c), hi = a.cwiseMax(b).cwiseMax(c);
+      Vec3 n;
+      double d = 0.0, tol = 0.0;
+      plane(a, b, c, n, d, tol);
+      bool may_touch = false;
+      for (const BladeTriangle& bt : bts) {
+        if ((hi.array() < bt.lo.array()).any() || (lo.array() > bt.hi.array()).any()) continue;
+        if (one_side(bt.n, bt.d, bt.tol, a, b, c)) continue;
+        const Tri& u = blade.triangles[static_cast<std::size_t>(&bt - bts.data())];
+        if (one_side(n, d, tol, blade.vertices[static_cast<std::size_t>(u[0])],
+                     blade.vertices[static_cast<std::size_t>(u[1])], blade.vertices[static_cast<std::size_t>(u[2])])) {
+          continue;
+        }
+        may_touch = true;
+        break;
+      }
+      if (may_touch) touching.push_back(f);
+    }
+    patch.swap(touching);
+    // The clear faces are candidates for the closure below, like the faces near G.
+    std::vector<int32_t> candidates;
+    std::set_difference(region.begin(), region.end(), patch.begin(), patch.end(), std::back_inserter(candidates));
+    const auto mid = static_cast<std::ptrdiff_t>(candidates.size());
+    candidates.insert(candidates.end(), near_faces.begin(), near_faces.end());
+    std::inplace_merge(candidates.begin(), candidates.begin() + mid, candidates.end());
+    near_faces.swap(candidates);
+  }
   // Close P around the vertices where its faces form more than one fan (a pinched vertex would need one copy per
   // fan, and corefinement's self-intersection check would then see distinct vertices touching): add the faces
-  // around them, which lie outside G, until no vertex is pinched.
+  // around them (clear faces, or faces outside G), until no vertex is pinched.
   for (int round = 0; round < 32; ++round) {
     const std::vector<int32_t> pinched = pinched_vertices(surface, patch);
     if (pinched.empty()) break;
@@ -577,6 +684,65 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
     std::sort(patch.begin(), patch.end());
   }
   result.patch_triangles = static_cast<int>(patch.size());
+
+  // The clear faces (in G, not in P): connected through shared vertices, each group lies strictly on one side of
+  // the blade's surface; one exact point query per group decides. Those inside go whole (`gone`); those outside
+  // stay untouched and count among the faces near P.
+  std::vector<int32_t> gone;  // faces of S strictly inside the blade, ascending
+  {
+    std::vector<int32_t> clear;
+    std::set_difference(region.begin(), region.end(), patch.begin(), patch.end(), std::back_inserter(clear));
+    if (!clear.empty()) {
+      std::vector<int32_t> vertices;  // of the clear faces, ascending
+      vertices.reserve(clear.size() * 3);
+      for (const int32_t f : clear) {
+        for (const int32_t v : surface.triangles[static_cast<std::size_t>(f)]) vertices.push_back(v);
+      }
+      std::sort(vertices.begin(), vertices.end());
+      vertices.erase(std::unique(vertices.begin(), vertices.end()), vertices.end());
+      const auto local = [&](int32_t v) {
+        return static_cast<int>(std::lower_bound(vertices.begin(), vertices.end(), v) - vertices.begin());
+      };
+      std::vector<int> parent(vertices.size());
+      std::iota(parent.begin(), parent.end(), 0);
+      const auto find = [&](int x) {
+        while (parent[static_cast<std::size_t>(x)] != x) {
+          parent[static_cast<std::size_t>(x)] = parent[static_cast<std::size_t>(parent[static_cast<std::size_t>(x)])];
+          x = parent[static_cast<std::size_t>(x)];
+        }
+        return x;
+      };
+      for (const int32_t f : clear) {
+        const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
+        const int a = find(local(t[0]));
+        for (int k = 1; k < 3; ++k) {
+          const int b = find(local(t[static_cast<std::size_t>(k)]));
+          if (a != b) parent[static_cast<std::size_t>(std::max(a, b))] = std::min(a, b);
+        }
+      }
+      using Side_of = CGAL::Side_of_triangle_mesh<Mesh, Kernel>;
+      const Side_of::AABB_tree tree(bmesh.faces().begin(), bmesh.faces().end(), bmesh);
+      const Side_of inside_blade(tree);
+      std::vector<char> side(vertices.size(), 0);  // per root: 1 inside, 2 outside
+      for (const int32_t f : clear) {
+        const int r = find(local(surface.triangles[static_cast<std::size_t>(f)][0]));
+        char& sr = side[static_cast<std::size_t>(r)];
+        if (sr == 0) {
+          const CGAL::Bounded_side b = inside_blade(to_point(surface.vertices[static_cast<std::size_t>(vertices[static_cast<std::size_t>(r)])]));
+          if (b == CGAL::ON_BOUNDARY) {
+            throw CutFailure{"surface vertex " + std::to_string(vertices[static_cast<std::size_t>(r)]) +
+                             " lies on the blade although its faces were found clear of it"};
+          }
+          sr = b == CGAL::ON_BOUNDED_SIDE ? 1 : 2;
+        }
+        if (sr == 1) gone.push_back(f);
+      }
+      // near_faces holds the clear faces (closure candidates): the outside ones stay there, the gone ones leave.
+      std::vector<int32_t> rest;
+      std::set_difference(near_faces.begin(), near_faces.end(), gone.begin(), gone.end(), std::back_inserter(rest));
+      near_faces.swap(rest);
+    }
+  }
 
   // Copy P into a Surface_mesh. After the closure above no vertex is pinched; were one left (32 rounds did not
   // suffice), it would get one copy per fan.
@@ -838,13 +1004,22 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
   // Nothing changes: every P region kept, every blade region discarded.
   const bool p_all_kept = std::all_of(p_keep.begin(), p_keep.end(), [](char k) { return k != 0; });
   const bool b_none_kept = std::none_of(b_keep.begin(), b_keep.end(), [](char k) { return k != 0; });
-  if (p_all_kept && b_none_kept) {
+  if (p_all_kept && b_none_kept && gone.empty()) {
     result.status = SurfaceCutStatus::no_op;
     result.reason = "blade does not remove material from the surface (it misses it or only touches it)";
     result.mesh = surface;
     result.triangle_origin.resize(static_cast<std::size_t>(nf));
     std::iota(result.triangle_origin.begin(), result.triangle_origin.end(), 0);
     return;
+  }
+
+  // From here on, P is the faces that change: the CGAL patch and the gone faces (which have no pieces).
+  if (!gone.empty()) {
+    std::vector<int32_t> all;
+    all.reserve(patch.size() + gone.size());
+    std::merge(patch.begin(), patch.end(), gone.begin(), gone.end(), std::back_inserter(all));
+    patch.swap(all);
+    patch_arcs = open_fans(surface, patch);
   }
 
   // Node ids: old vertex o -> o; new P vertex k (P index >= p_initial_vertices) -> nv + (k - p_initial); blade
@@ -892,6 +1067,9 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
   // Which old P vertices survive; removed ones are those of P used by no kept piece.
   std::vector<char> used_old;  // indexed like p_old's distinct values, via a sorted list
   std::vector<int32_t> p_old_sorted(p_old.begin(), p_old.begin() + static_cast<std::ptrdiff_t>(p_initial_vertices));
+  for (const int32_t f : gone) {
+    for (const int32_t v : surface.triangles[static_cast<std::size_t>(f)]) p_old_sorted.push_back(v);
+  }
   std::sort(p_old_sorted.begin(), p_old_sorted.end());
   p_old_sorted.erase(std::unique(p_old_sorted.begin(), p_old_sorted.end()), p_old_sorted.end());
   used_old.assign(p_old_sorted.size(), 0);
@@ -940,9 +1118,13 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
     copy_range(nv);
   }
   std::vector<int32_t> new_to_out(used_new.size(), -1);
+  std::vector<char> constructed_inserted;  // per inserted vertex: 1 for an intersection point (made by CGAL)
+  const std::size_t blade_input_vertices = blade.vertices.size();
   for (std::size_t k = 0; k < used_new.size(); ++k) {
     if (!used_new[k]) continue;
     new_to_out[k] = static_cast<int32_t>(out.vertices.size());
+    constructed_inserted.push_back(
+        k < static_cast<std::size_t>(n_new_p) || k - static_cast<std::size_t>(n_new_p) >= blade_input_vertices ? 1 : 0);
     const Point p = k < static_cast<std::size_t>(n_new_p)
                         ? pmesh.point(VI(static_cast<Mesh::size_type>(p_initial_vertices + k)))
                         : bmesh.point(VI(static_cast<Mesh::size_type>(k - static_cast<std::size_t>(n_new_p))));
@@ -1077,7 +1259,7 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
         neighbours.push_back(f - static_cast<int32_t>(k) + bucket_begin[k]);
       }
     }
-    verify_self_intersections(out, changed, changed_whole, neighbours);
+    verify_self_intersections(out, changed, changed_whole, kept_count, constructed_inserted, neighbours);
   }
   result.status = SurfaceCutStatus::ok;
 }

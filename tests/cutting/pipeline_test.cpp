@@ -389,8 +389,11 @@ TEST(CutPipeline, BladeCutsOnlyTheMaterialOfItsOwnComponent) {
   }
   expect_watertight(top, "upper slab");
   EXPECT_NEAR(sim::signed_volume(top), 0.021 * 0.021 * 0.003, 1e-12 * 0.021 * 0.021 * 0.003);
-  for (const Vec3& p : s0.vertices)
-    if (p.z() > 0.0045) EXPECT_NE(std::find(top.vertices.begin(), top.vertices.end(), p), top.vertices.end());
+  for (const Vec3& p : s0.vertices) {
+    if (p.z() > 0.0045) {
+      EXPECT_NE(std::find(top.vertices.begin(), top.vertices.end(), p), top.vertices.end());
+    }
+  }
   int upper_tets = 0;
   for (int t = 0; t < o.cut.graph->num_tets_total(); ++t)
     upper_tets += o.cut.graph->alive(t) && o.cut.graph->tet(t)[0].z() > 0.0045;
@@ -398,8 +401,11 @@ TEST(CutPipeline, BladeCutsOnlyTheMaterialOfItsOwnComponent) {
   EXPECT_GT(out.tets_removed, 0);
   // The upper slab's leaves were not refined: none of them is finer than the base level.
   const sim::ObjectModel& m = o.sim->model();
-  for (int e = 0; e < m.num_elements(); ++e)
-    if (m.root().cell_box(m.tree().leaf(e)).min.z() > 0.0045) EXPECT_EQ(m.tree().leaf(e).level, 3);
+  for (int e = 0; e < m.num_elements(); ++e) {
+    if (m.root().cell_box(m.tree().leaf(e)).min.z() > 0.0045) {
+      EXPECT_EQ(m.tree().leaf(e).level, 3);
+    }
+  }
   EXPECT_EQ(m.dofs().check_invariants(), "");
 }
 

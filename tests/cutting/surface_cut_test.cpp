@@ -150,6 +150,43 @@ TEST(SurfaceCut, BladeContainingTheObjectRemovesEverything) {
   EXPECT_NEAR(r.removed_volume, 1.0, 1e-14);
 }
 
+TEST(SurfaceCut, FacesStrictlyInsideTheBladeGoWithoutCorefinement) {
+  // A finely tessellated cube (32 x 32 quads a side) loses a 0.6 x 0.6 x 0.1 slab from its top. About 740 top faces
+  // lie strictly inside the blade: they go whole, and only the faces along the contour are corefined.
+  const TriMesh s = test::grid_cube(32, 1.0);
+  const SurfaceCutResult r = cut_surface(s, box(Vec3(0.2, 0.2, 0.9), Vec3(0.8, 0.8, 1.5)));
+  expect_valid_cut(s, r, "slab");
+  EXPECT_NEAR(r.removed_volume, 0.6 * 0.6 * 0.1, 1e-14);
+  EXPECT_EQ(test::euler_characteristic(r.mesh), 2);
+  EXPECT_LT(r.patch_triangles, 400);
+  const auto kept_top = std::count_if(r.mesh.triangles.begin(), r.mesh.triangles.end(), [&](const auto& t) {
+    return r.mesh.vertices[std::size_t(t[0])].z() == 1.0 && r.mesh.vertices[std::size_t(t[1])].z() == 1.0 &&
+           r.mesh.vertices[std::size_t(t[2])].z() == 1.0;
+  });
+  double top_area = 0.0;  // what is left of the top face
+  for (const auto& t : r.mesh.triangles) {
+    const Vec3& a = r.mesh.vertices[std::size_t(t[0])];
+    const Vec3& b = r.mesh.vertices[std::size_t(t[1])];
+    const Vec3& c = r.mesh.vertices[std::size_t(t[2])];
+    if (a.z() == 1.0 && b.z() == 1.0 && c.z() == 1.0) top_area += 0.5 * (b - a).cross(c - a).norm();
+  }
+  EXPECT_GT(kept_top, 0);
+  EXPECT_NEAR(top_area, 1.0 - 0.36, 1e-12);
+}
+
+TEST(SurfaceCut, ComponentInsideTheBladeGoesWholeWhileAnotherIsCut) {
+  // A small cube entirely inside the blade goes whole (no face of it touches the blade), while the big one beside
+  // it loses the part the blade covers.
+  TriMesh small = test::grid_cube(4, 0.2);
+  for (Vec3& p : small.vertices) p += Vec3(1.4, 0.4, 0.4);
+  const TriMesh s = test::merged(test::grid_cube(4, 1.0), small);
+  const SurfaceCutResult r = cut_surface(s, box(Vec3(0.75, 0.25, 0.25), Vec3(1.75, 0.75, 0.75)));
+  expect_valid_cut(s, r, "beside");
+  EXPECT_NEAR(r.removed_volume, 0.25 * 0.5 * 0.5 + 0.2 * 0.2 * 0.2, 1e-14);
+  for (const Vec3& p : r.mesh.vertices) EXPECT_LE(p.x(), 1.0);
+  EXPECT_EQ(test::euler_characteristic(r.mesh), 2);
+}
+
 TEST(SurfaceCut, CoplanarFlushInsideOnVertices) {
   // The blade's top face lies in the surface's top plane and its corners on surface vertices.
   const TriMesh s = test::grid_cube(4, 1.0);

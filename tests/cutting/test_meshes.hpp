@@ -87,6 +87,11 @@ inline sim::TriMesh merged(const sim::TriMesh& a, const sim::TriMesh& b) {
   return out;
 }
 
+/// V - E + F of a closed triangle mesh (E = 3F/2): 2 per sphere-like component, 0 per torus.
+inline long euler_characteristic(const sim::TriMesh& m) {
+  return long(m.vertices.size()) - long(m.triangles.size()) * 3 / 2 + long(m.triangles.size());
+}
+
 /// True when the segment pq crosses the triangle abc (Möller–Trumbore, in double; for generic inputs only).
 inline bool segment_hits_triangle(const sim::Vec3& p, const sim::Vec3& q, const sim::Vec3& a, const sim::Vec3& b,
                                   const sim::Vec3& c) {

@@ -1,10 +1,13 @@
 // The local surface boolean S \ B' (SPEC §4 stage 2). The only translation unit of the surface cut that sees CGAL.
 //
 // Algorithm:
-//  1. The patch P is the set of faces of S whose bounding box meets the grown bounding box G of the blade (found with
-//     vertex outcodes, one pass over the vertices and one over the faces). A face outside P cannot touch the blade,
-//     so P's boundary edges (shared with faces outside P) stay untouched. Where P's faces would form several fans
-//     around a vertex, the faces around it are added (they lie outside G), so every vertex of P is one CGAL vertex.
+//  1. The faces of S whose bounding box meets the grown bounding box G of the blade are found with vertex outcodes
+//     (one pass over the vertices and one over the faces). Of those, the patch P is the faces that may touch the
+//     blade (a conservative plane-side test against the blade triangles near them); the others lie strictly inside
+//     or strictly outside the blade, are grouped through shared vertices and classified with one exact point query
+//     per group: the inside ones go whole, the outside ones stay. A face outside G cannot touch the blade, so P's
+//     boundary edges stay untouched. Where P's faces would form several fans around a vertex, the faces around it
+//     are added, so every vertex of P is one CGAL vertex.
 //  2. P is copied into a Surface_mesh and corefined with the blade (PMP::corefine, exact predicates), marking the
 //     intersection edges as constrained and recording, through a visitor, which input face each piece lies in.
 //  3. P and the blade are cut into regions along the constrained edges. A P region is removed when a point inside it
@@ -17,9 +20,9 @@
 //     test (axis rays, orientation predicates on S's input coordinates, retried on grazing rays) puts it inside S.
 //     Where options.removable rejects a region's test point, a P region is kept and a blade region without votes is
 //     discarded (the pipeline's restriction of B'_i to the material of component i).
-//  4. The kept pieces are stitched back into S: P's original vertices keep their indices, new vertices are matched
-//     between the two meshes by identical coordinates. The result is verified locally (verify_local and
-//     verify_self_intersections), and V(S) - V(S') is summed over the changed faces only.
+//  4. The kept pieces are stitched back into S in place of P and the gone faces: P's original vertices keep their
+//     indices, new vertices are matched between the two meshes by identical coordinates. The result is verified
+//     locally (verify_local and verify_self_intersections), and V(S) - V(S') is summed over the changed faces only.
 #include "octocut/cutting/surface_cut.hpp"
 
 #include "cgal_exact.hpp"  // first: the exact number type of Epeck
@@ -593,15 +596,17 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
   {
     struct BladeTriangle {
       Vec3 lo, hi, n;    // grown box, m; normal (not unit), m^2
-      double d, tol;     // plane offset n.p, m^3; its rounding bound, m^3
+      double d, tol;     // plane offset n.p, m^3; the bound on the plane test's rounding per metre of scale, m^2
     };
-    double magnitude = 0.0;  // largest coordinate magnitude in play, m
-    magnitude = std::max(gmin.cwiseAbs().maxCoeff(), gmax.cwiseAbs().maxCoeff());
-    const double scale = (gmax - gmin).norm() + magnitude;  // m
+    // Distances and coordinate magnitudes in play for the blade (G), m; a face adds its own.
+    const double g_scale = (gmax - gmin).norm() + std::max(gmin.cwiseAbs().maxCoeff(), gmax.cwiseAbs().maxCoeff());
+    // The plane test n.x - d in doubles errs by a few ulps of |n| |x| (the dot products) plus |b - a| |c - a| |x - a|
+    // (the rounded cross product, which matters for slivers, whose |n| is far below |b - a| |c - a|): tol bounds both
+    // with a margin of a million, per metre of |x| and |x - a|.
     const auto plane = [&](const Vec3& a, const Vec3& b, const Vec3& c, Vec3& n, double& d, double& tol) {
       n = (b - a).cross(c - a);
       d = n.dot(a);
-      tol = 1e-9 * n.norm() * scale;
+      tol = 1e-9 * (n.norm() + (b - a).norm() * (c - a).norm());
     };
     std::vector<BladeTriangle> bts;
     bts.reserve(blade.triangles.size());
@@ -630,12 +635,13 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
       Vec3 n;
       double d = 0.0, tol = 0.0;
       plane(a, b, c, n, d, tol);
+      const double scale = g_scale + (hi - lo).norm() + std::max(lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff());
       bool may_touch = false;
       for (const BladeTriangle& bt : bts) {
         if ((hi.array() < bt.lo.array()).any() || (lo.array() > bt.hi.array()).any()) continue;
-        if (one_side(bt.n, bt.d, bt.tol, a, b, c)) continue;
+        if (one_side(bt.n, bt.d, bt.tol * scale, a, b, c)) continue;
         const Tri& u = blade.triangles[static_cast<std::size_t>(&bt - bts.data())];
-        if (one_side(n, d, tol, blade.vertices[static_cast<std::size_t>(u[0])],
+        if (one_side(n, d, tol * scale, blade.vertices[static_cast<std::size_t>(u[0])],
                      blade.vertices[static_cast<std::size_t>(u[1])], blade.vertices[static_cast<std::size_t>(u[2])])) {
           continue;
         }

@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -172,6 +174,47 @@ TEST(SurfaceCut, FacesStrictlyInsideTheBladeGoWithoutCorefinement) {
   }
   EXPECT_GT(kept_top, 0);
   EXPECT_NEAR(top_area, 1.0 - 0.36, 1e-12);
+}
+
+TEST(SurfaceCut, SliverFacesAcrossTheBladeAreCut) {
+  // The unit cube's top face with a vertex 1e-12 off its diagonal: the triangle it splits becomes a sliver (aspect
+  // about 1e12) along the diagonal, crossed by the walls of a box blade punched 0.1 deep, all tilted. The sliver must
+  // be found to touch the blade and be cut exactly.
+  TriMesh s = test::grid_cube(1, 1.0);
+  const Vec3 m(0.5, 0.5 + 1e-12, 1.0);
+  const auto v = static_cast<int32_t>(s.vertices.size());
+  s.vertices.push_back(m);
+  bool split = false;
+  for (std::size_t f = 0; f < s.triangles.size() && !split; ++f) {
+    const auto t = s.triangles[f];
+    const Vec3& p = s.vertices[std::size_t(t[0])];
+    const Vec3& q = s.vertices[std::size_t(t[1])];
+    const Vec3& r = s.vertices[std::size_t(t[2])];
+    if (p.z() != 1.0 || q.z() != 1.0 || r.z() != 1.0) continue;
+    // m inside (p, q, r) in xy: the same side of all three edges.
+    const auto side = [&](const Vec3& a, const Vec3& b) {
+      return (b.x() - a.x()) * (m.y() - a.y()) - (b.y() - a.y()) * (m.x() - a.x());
+    };
+    if (!(side(p, q) > 0 && side(q, r) > 0 && side(r, p) > 0)) continue;
+    s.triangles[f] = {t[0], t[1], v};
+    s.triangles.push_back({t[1], t[2], v});
+    s.triangles.push_back({t[2], t[0], v});
+    split = true;
+  }
+  ASSERT_TRUE(split);
+  // Tilted, so that the planes' normals are rounded.
+  TriMesh b = box(Vec3(0.4, 0.4, 0.9), Vec3(0.6, 0.6, 1.1));
+  const Eigen::Matrix3d rot = Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  for (Vec3& p : s.vertices) p = rot * p;
+  for (Vec3& p : b.vertices) p = rot * p;
+  expect_watertight(s, "input");
+  const SurfaceCutResult r = cut_surface(s, b);
+  // (expect_bookkeeping's plane test of each piece against its origin cannot take such a sliver's rounded normal.)
+  ASSERT_EQ(r.status, SurfaceCutStatus::ok) << r.reason;
+  expect_watertight(r.mesh, "sliver");
+  EXPECT_NEAR(r.removed_volume, 0.2 * 0.2 * 0.1, 1e-14);
+  EXPECT_NEAR(sim::signed_volume(s) - sim::signed_volume(r.mesh), r.removed_volume, 1e-14);
+  EXPECT_FALSE(find_self_intersection(r.mesh).has_value());
 }
 
 TEST(SurfaceCut, ComponentInsideTheBladeGoesWholeWhileAnotherIsCut) {

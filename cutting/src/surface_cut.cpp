@@ -739,7 +739,9 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
             throw CutFailure{"surface vertex " + std::to_string(vertices[static_cast<std::size_t>(r)]) +
                              " lies on the blade although its faces were found clear of it"};
           }
-          sr = b == CGAL::ON_BOUNDED_SIDE ? 1 : 2;
+          // Inside, but where the caller does not let this blade remove material, the group stays.
+          const Vec3& at = surface.vertices[static_cast<std::size_t>(vertices[static_cast<std::size_t>(r)])];
+          sr = b == CGAL::ON_BOUNDED_SIDE && (!options.removable || options.removable(at)) ? 1 : 2;
         }
         if (sr == 1) gone.push_back(f);
       }

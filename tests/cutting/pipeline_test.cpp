@@ -324,7 +324,7 @@ TEST(CutPipeline, BladeCutsOnlyTheMaterialOfItsOwnComponent) {
   }
   Object o;
   o.cut.graph = std::make_shared<sim::MaterialGraph>(std::move(tets));
-  o.cut.surface = test::merged(sim::closed_box_grid(lower, 8), sim::closed_box_grid(upper, 8));
+  o.cut.surface = test::merged(sim::closed_box_grid(lower, 32), sim::closed_box_grid(upper, 32));
   o.cut.cut_faces.assign(o.cut.surface.triangles.size(), 0);
   o.cut.surface_checked = true;
   sim::OctreeSpec spec;

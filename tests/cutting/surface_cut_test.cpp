@@ -442,10 +442,11 @@ TEST(SurfaceCut, SurfaceCheckOffGivesTheSameResult) {
 TEST(SurfaceCut, RemovableRestrictsTheCutToWhereItSaysYes) {
   // Two 10 mm cubes stacked with a 2 mm gap, one punch through both. Restricted to z < 11 mm, only the lower cube
   // gets a hole; the upper one stays exactly as it was (split along the blade's contour at most, same volume).
+  // The grids are fine enough (0.625 mm) for faces to lie strictly inside the 1 mm blade.
   const double e = 0.01, r = 0.001;
-  TriMesh upper = test::grid_cube(4, e);
+  TriMesh upper = test::grid_cube(16, e);
   for (Vec3& p : upper.vertices) p.z() += 0.012;
-  const TriMesh s = test::merged(test::grid_cube(4, e), upper);
+  const TriMesh s = test::merged(test::grid_cube(16, e), upper);
   const TriMesh b = cylinder(0.0053, 0.0047, r, -0.002, 0.025);
   const SurfaceCutResult both = cut_surface(s, b);
   expect_valid_cut(s, both, "both");

@@ -720,9 +720,8 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
       };
       for (const int32_t f : clear) {
         const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
-        const int a = find(local(t[0]));
         for (int k = 1; k < 3; ++k) {
-          const int b = find(local(t[static_cast<std::size_t>(k)]));
+          const int a = find(local(t[0])), b = find(local(t[static_cast<std::size_t>(k)]));
           if (a != b) parent[static_cast<std::size_t>(std::max(a, b))] = std::min(a, b);
         }
       }

@@ -287,32 +287,6 @@ bool triangles_intersect(const sim::TriMesh& m, const Tri& s, const Tri& t) {
   return CGAL::do_intersect(ts, tt);
 }
 
-// The vertices (ascending) around which the faces `patch` of `surface` form more than one fan.
-std::vector<int32_t> pinched_vertices(const sim::TriMesh& surface, const std::vector<int32_t>& patch) {
-  std::vector<std::array<int32_t, 3>> corners;  // (vertex, next, previous)
-  corners.reserve(patch.size() * 3);
-  for (const int32_t f : patch) {
-    const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
-    for (int k = 0; k < 3; ++k) corners.push_back({t[k], t[(k + 1) % 3], t[(k + 2) % 3]});
-  }
-  std::sort(corners.begin(), corners.end());
-  std::vector<int32_t> pinched;
-  for (std::size_t i = 0; i < corners.size();) {
-    std::size_t j = i;
-    while (j < corners.size() && corners[j][0] == corners[i][0]) ++j;
-    // Each open fan starts at one corner whose next vertex is no corner's previous vertex.
-    int open = 0;
-    for (std::size_t a = i; a < j; ++a) {
-      bool matched = false;
-      for (std::size_t b = i; b < j && !matched; ++b) matched = b != a && corners[b][2] == corners[a][1];
-      if (!matched) ++open;
-    }
-    if (open > 1) pinched.push_back(corners[i][0]);
-    i = j;
-  }
-  return pinched;
-}
-
 // The number of open fans that `faces` (face indices of `surface`) form around each vertex where they form any (the
 // vertices on their boundary).
 std::unordered_map<int32_t, int> open_fans(const sim::TriMesh& surface, const std::vector<int32_t>& faces) {
@@ -327,6 +301,7 @@ std::unordered_map<int32_t, int> open_fans(const sim::TriMesh& surface, const st
   for (std::size_t i = 0; i < corners.size();) {
     std::size_t j = i;
     while (j < corners.size() && corners[j][0] == corners[i][0]) ++j;
+    // Each open fan starts at one corner whose next vertex is no corner's previous vertex.
     int open = 0;
     for (std::size_t a = i; a < j; ++a) {
       bool matched = false;
@@ -337,6 +312,16 @@ std::unordered_map<int32_t, int> open_fans(const sim::TriMesh& surface, const st
     i = j;
   }
   return fans;
+}
+
+// The vertices around which the faces `patch` form more than one fan, ascending.
+std::vector<int32_t> pinched_vertices(const sim::TriMesh& surface, const std::vector<int32_t>& patch) {
+  std::vector<int32_t> pinched;
+  for (const auto& [v, fans] : open_fans(surface, patch)) {
+    if (fans > 1) pinched.push_back(v);
+  }
+  std::sort(pinched.begin(), pinched.end());
+  return pinched;
 }
 
 // Local verification of S': `changed` are the triangles built from the corefined patch and the blade (indices into

@@ -426,6 +426,7 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
         moved = std::max(moved, (rest_blade.vertices[v] - request.blade.vertices[v]).cwiseAbs().maxCoeff());
       if (moved <= 1e-12 * root.size) rest_blade = request.blade;
       foreign.push_back(foreign_leaves(model, BladeVolume(rest_blade), g));
+      if (!foreign.back().empty()) ++out.restricted_components;
       rest_blades.push_back(std::move(rest_blade));
     }
     out.ms.back_transform = ms_since(t0);

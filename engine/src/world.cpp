@@ -476,6 +476,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
         c.status = o.status;
         c.reason = o.reason;
         c.components = o.components;
+        c.restricted_components = o.restricted_components;
         c.removed_volume_m3 = o.removed_volume;
         c.tets_removed = o.tets_removed;
         c.leaves_refined = o.leaves_refined;

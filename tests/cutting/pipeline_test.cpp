@@ -83,6 +83,7 @@ TEST(CutPipeline, PunchThroughASlabAtRest) {
   const auto out = cut(o, prism(Vec3(0.02, 0.02, 0.002), r, 0.01, n), r * std::cos(std::numbers::pi / n));
   ASSERT_EQ(out.status, "ok") << out.reason;
   EXPECT_EQ(out.components, 1);
+  EXPECT_EQ(out.restricted_components, 0);
   // The boolean is exact: the removed volume is the prism's area times the slab's thickness.
   const double expect = prism_area(r, n) * 0.004;
   EXPECT_NEAR(out.removed_volume, expect, 1e-9 * expect);
@@ -227,6 +228,7 @@ TEST(CutPipeline, FoldedSlabPunchedOnceShowsTwoHolesInRestSpace) {
   const auto out = cut(o, prism(Vec3(0.02, 0.015, 0.007), r, 0.03, 32), r * std::cos(std::numbers::pi / 32));
   ASSERT_EQ(out.status, "ok") << out.reason;
   EXPECT_EQ(out.components, 2);
+  EXPECT_EQ(out.restricted_components, 0);  // each B'_i lies in its own half's rest place
   const double expect = 2.0 * prism_area(r, 32) * 0.004;
   EXPECT_NEAR(out.removed_volume, expect, 1e-9 * expect);
   expect_watertight(o.cut.surface, "surface");
@@ -364,6 +366,7 @@ TEST(CutPipeline, BladeCutsOnlyTheMaterialOfItsOwnComponent) {
   const auto out = cut(o, prism(Vec3(0.0105, 0.0105, 0.003), r, 0.01, n), r * std::cos(std::numbers::pi / n), opt);
   ASSERT_EQ(out.status, "ok") << out.reason;
   EXPECT_EQ(out.components, 1);
+  EXPECT_EQ(out.restricted_components, 1);
   // Only the lower slab's prism goes (unrestricted, 2 mm of the upper slab would go too).
   const double expect = prism_area(r, n) * 0.003;
   EXPECT_NEAR(out.removed_volume, expect, 1e-9 * expect);

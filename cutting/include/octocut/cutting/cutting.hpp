@@ -65,6 +65,8 @@ struct CutOutcome {
   std::string status = "skipped";     ///< "ok" | "skipped" | "no-op"
   std::string reason;                 ///< why the cut was skipped or was a no-op; empty when ok
   int components = 0;                 ///< connected material components the blade touched (one transform each)
+  int restricted_components = 0;      ///< components whose rest-space blade also covered other material, which it
+                                      ///< left alone (SPEC §4 stage 2: B'_i cuts only component i's material)
   double removed_volume = 0.0;        ///< V(S) - V(S'), m^3: the blade's share, fragments not included
   int tets_removed = 0;               ///< tets of M the blade touched
   int leaves_refined = 0;             ///< refine operations

@@ -53,30 +53,58 @@ bool boxes_overlap(const sim::Box3& a, const sim::Box3& b) {
 
 sim::Box3 grow(const sim::Box3& a, const sim::Box3& b) { return {a.min.cwiseMin(b.min), a.max.cwiseMax(b.max)}; }
 
-// The surface as a sequence of edits: which original vertex each current vertex is (-1 for a new one), and which
-// triangles are cut faces.
+// The surface as a sequence of edits. Every edit keeps the surviving vertices in order and appends the new ones, so
+// the current vertices are the original ones that survive (in order) and then new ones: the track needs only the
+// original indices that are gone and the number of original vertices left, not a map over all of S.
 struct SurfaceTrack {
-  sim::TriMesh mesh;
-  std::vector<int> origin;     // original vertex index of each current vertex, -1 when new (|V|)
-  std::vector<char> cut_face;  // (|F|)
+  sim::TriMesh mesh;                       // S after the edits so far (meaningful once `edited`)
+  std::vector<char> cut_face;              // (|F| of mesh), once `edited`
+  std::vector<int> removed;                // original indices of the original vertices that are gone, ascending
+  std::size_t kept = 0;                    // mesh.vertices[0, kept) are original vertices
+  bool edited = false;
 
-  // Applies one boolean result: kept vertices stay in order, inserted ones come after them.
-  void apply(SurfaceCutResult&& r) {
-    std::vector<char> gone(origin.size(), 0);  // origin has |V| entries even before the first apply
-    for (int v : r.removed_vertices) gone[std::size_t(v)] = 1;
-    std::vector<int> next;
-    next.reserve(r.mesh.vertices.size());
-    for (std::size_t v = 0; v < origin.size(); ++v)
-      if (!gone[v]) next.push_back(origin[v]);
-    next.resize(r.mesh.vertices.size(), -1);
+  explicit SurfaceTrack(std::size_t original_vertices) : kept(original_vertices) {}
+
+  // Removes current vertices (ascending current indices) from the bookkeeping.
+  void forget(const std::vector<int>& current) {
+    // The original index of current vertex c < kept is the c-th original index not in `removed`.
+    std::vector<int> gone;  // original indices, ascending
+    std::size_t r = 0;      // into removed
+    long original = 0;      // the original index of current vertex `at`
+    long at = 0;
+    for (const int c : current) {
+      if (std::size_t(c) >= kept) break;
+      // Advance from current vertex `at` to c, skipping the original indices already gone.
+      while (true) {
+        while (r < removed.size() && removed[r] == original) {
+          ++r;
+          ++original;
+        }
+        if (at == c) break;
+        ++at;
+        ++original;
+      }
+      gone.push_back(int(original));
+    }
+    const std::size_t gone_kept = gone.size();
+    std::vector<int> merged;
+    merged.reserve(removed.size() + gone.size());
+    std::merge(removed.begin(), removed.end(), gone.begin(), gone.end(), std::back_inserter(merged));
+    removed = std::move(merged);
+    kept -= gone_kept;
+  }
+
+  // Applies one boolean result to `current_flags` (the cut-face flags of the surface it was computed on).
+  void apply(SurfaceCutResult&& r, const std::vector<char>& current_flags) {
+    forget(r.removed_vertices);
     std::vector<char> flags(r.mesh.triangles.size(), 1);
     for (std::size_t f = 0; f < flags.size(); ++f) {
       const int o = r.triangle_origin[f];
-      flags[f] = o < 0 ? 1 : cut_face[std::size_t(o)];
+      flags[f] = o < 0 || std::size_t(o) >= current_flags.size() ? char(o < 0) : current_flags[std::size_t(o)];
     }
-    origin = std::move(next);
     cut_face = std::move(flags);
     mesh = std::move(r.mesh);
+    edited = true;
   }
 
   // Removes the given triangles and the vertices nothing uses any more, keeping the order of the rest.
@@ -92,18 +120,20 @@ struct SurfaceTrack {
     }
     std::vector<int32_t> remap(mesh.vertices.size(), -1);
     std::vector<sim::Vec3> verts;
-    std::vector<int> orig;
+    std::vector<int> unused;  // current indices, ascending
     for (std::size_t v = 0; v < mesh.vertices.size(); ++v) {
-      if (!used[v]) continue;
+      if (!used[v]) {
+        unused.push_back(int(v));
+        continue;
+      }
       remap[v] = int32_t(verts.size());
       verts.push_back(mesh.vertices[v]);
-      orig.push_back(origin[v]);
     }
     for (auto& t : tris)
       for (int32_t& v : t) v = remap[std::size_t(v)];
+    forget(unused);
     mesh.vertices = std::move(verts);
     mesh.triangles = std::move(tris);
-    origin = std::move(orig);
     cut_face = std::move(flags);
   }
 };
@@ -471,11 +501,7 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     t0 = Clock::now();
     // The first blade cuts object.surface itself; the track copies S only when no blade changed it (S stays as it
     // is until the commit).
-    SurfaceTrack track;
-    track.origin.resize(object.surface.vertices.size());
-    std::iota(track.origin.begin(), track.origin.end(), 0);
-    track.cut_face = object.cut_faces;
-    track.cut_face.resize(object.surface.triangles.size(), 0);
+    SurfaceTrack track(object.surface.vertices.size());
     bool surface_changed = false;
     SurfaceCutOptions sopt;
     sopt.verify = options.verify;
@@ -510,11 +536,15 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
       if (r.status == SurfaceCutStatus::failed) throw StageFailure("surface: " + r.reason);
       if (r.status == SurfaceCutStatus::no_op) continue;
       out.removed_volume += r.removed_volume;
+      track.apply(std::move(r), surface_changed ? track.cut_face : object.cut_faces);
       surface_changed = true;
-      track.apply(std::move(r));
     }
     out.ms.surface = ms_since(t0);
-    if (!surface_changed) track.mesh = object.surface;
+    if (!surface_changed) {
+      track.mesh = object.surface;
+      track.cut_face = object.cut_faces;
+      track.cut_face.resize(track.mesh.triangles.size(), 0);
+    }
 
     model_known.wait();
     // A perturbed blade removes material where it now is: the model stages run again, here, with the blades used.
@@ -581,15 +611,8 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
       return finish("ok", "");
     }
     sim::SurfaceEdit edit;
-    std::size_t kept = 0;
-    while (kept < track.origin.size() && track.origin[kept] >= 0) ++kept;
-    {
-      std::vector<char> present(object.surface.vertices.size(), 0);
-      for (std::size_t v = 0; v < kept; ++v) present[std::size_t(track.origin[v])] = 1;
-      for (std::size_t v = 0; v < present.size(); ++v)
-        if (!present[v]) edit.removed_vertices.push_back(int(v));
-    }
-    edit.inserted_rest.assign(track.mesh.vertices.begin() + std::ptrdiff_t(kept), track.mesh.vertices.end());
+    edit.removed_vertices = track.removed;
+    edit.inserted_rest.assign(track.mesh.vertices.begin() + std::ptrdiff_t(track.kept), track.mesh.vertices.end());
     edit.triangles = track.mesh.triangles;
     embedding.update(*work.next, std::move(edit));  // strong guarantee: unchanged when it throws
     out.ms.embedding = ms_since(t0);

@@ -229,6 +229,9 @@ TEST(CutPipeline, FoldedSlabPunchedOnceShowsTwoHolesInRestSpace) {
   ASSERT_EQ(out.status, "ok") << out.reason;
   EXPECT_EQ(out.components, 2);
   EXPECT_EQ(out.restricted_components, 0);  // each B'_i lies in its own half's rest place
+  // Two booleans in turn, one embedding update: the embedding holds exactly the committed surface.
+  EXPECT_EQ(o.emb->rest_vertices(), o.cut.surface.vertices);
+  EXPECT_EQ(o.emb->triangles(), o.cut.surface.triangles);
   const double expect = 2.0 * prism_area(r, 32) * 0.004;
   EXPECT_NEAR(out.removed_volume, expect, 1e-9 * expect);
   expect_watertight(o.cut.surface, "surface");
@@ -300,6 +303,9 @@ TEST(CutPipeline, LooseHalfIsRemovedAsAFragment) {
       EXPECT_NEAR(out.fragment_volume, 0.017 * 0.04 * 0.004, 0.0015 * 0.04 * 0.004);
       expect_watertight(o.cut.surface, "surface");
       for (const Vec3& x : o.cut.surface.vertices) EXPECT_LT(x.x(), 0.0175);
+      // The boolean and then the fragment's surface removal, one embedding update: it holds the committed surface.
+      EXPECT_EQ(o.emb->rest_vertices(), o.cut.surface.vertices);
+      EXPECT_EQ(o.emb->triangles(), o.cut.surface.triangles);
     } else {
       EXPECT_EQ(out.fragments_removed, 0);
       EXPECT_EQ(count, 2);

@@ -460,7 +460,10 @@ void verify_self_intersections(const sim::TriMesh& out, const std::vector<int32_
   for (std::size_t i = 0; i < changed.size(); ++i) add(changed[i], !whole[i] && constructed(changed[i]) ? 1 : 0);
   for (const int32_t f : neighbours) add(f, 0);
   // The changed faces against all of them (pairs of unchanged faces are never enumerated); a pair of two changed
-  // faces comes twice and is tested once, and a face against itself is skipped.
+  // faces comes twice and is tested once, and a face against itself is skipped. Below kScanCutoff boxes CGAL goes
+  // straight to its sorted two-way scan instead of building its segment tree first (a few hundred boxes per cut:
+  // 0.1-0.35 ms less; the same pairs).
+  constexpr std::ptrdiff_t kScanCutoff = 2048;
   bool found = false;
   std::array<int32_t, 2> best{};
   CGAL::box_intersection_d(changed_boxes.begin(), changed_boxes.end(), boxes.begin(), boxes.end(),
@@ -473,7 +476,7 @@ void verify_self_intersections(const sim::TriMesh& out, const std::vector<int32_
       if (!found || pair < best) best = pair;
       found = true;
     }
-  });
+  }, kScanCutoff);
   if (found) {
     throw CutFailure{"result triangles " + std::to_string(best[0]) + " and " + std::to_string(best[1]) +
                      " intersect"};

@@ -15,6 +15,7 @@
 #include "octocut/cutting/shape_matching.hpp"
 #include "octocut/cutting/surface_cut.hpp"
 #include "octocut/sim/dof_map.hpp"
+#include "union_find.hpp"
 
 namespace octocut::cutting {
 
@@ -27,25 +28,7 @@ double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
-// Union-find over n elements, with path halving; the root of a set is its smallest member.
-struct UnionFind {
-  std::vector<int> parent;
-  explicit UnionFind(int n) : parent(std::size_t(n)) { std::iota(parent.begin(), parent.end(), 0); }
-  int find(int i) {
-    while (parent[std::size_t(i)] != i) {
-      parent[std::size_t(i)] = parent[std::size_t(parent[std::size_t(i)])];
-      i = parent[std::size_t(i)];
-    }
-    return i;
-  }
-  void unite(int a, int b) {
-    a = find(a);
-    b = find(b);
-    if (a == b) return;
-    if (a < b) std::swap(a, b);
-    parent[std::size_t(a)] = b;
-  }
-};
+using detail::UnionFind;
 
 bool boxes_overlap(const sim::Box3& a, const sim::Box3& b) {
   return (a.min.array() <= b.max.array()).all() && (b.min.array() <= a.max.array()).all();
@@ -53,15 +36,31 @@ bool boxes_overlap(const sim::Box3& a, const sim::Box3& b) {
 
 sim::Box3 grow(const sim::Box3& a, const sim::Box3& b) { return {a.min.cwiseMin(b.min), a.max.cwiseMax(b.max)}; }
 
+// Groups `leaves` (leaf indices of `model`) by material connectivity among themselves: two leaves are united when
+// they share a face through which material connects. Index i of the result is leaves[i].
+UnionFind material_groups(const sim::ObjectModel& model, const std::vector<int>& leaves) {
+  const sim::RootGeometry& root = model.root();
+  std::vector<sim::Box3> box(leaves.size());  // rest boxes, m
+  for (std::size_t i = 0; i < leaves.size(); ++i) box[i] = root.cell_box(model.tree().leaf(leaves[i]));
+  UnionFind uf(int(leaves.size()));
+  for (std::size_t i = 0; i < leaves.size(); ++i) {
+    for (std::size_t j = i + 1; j < leaves.size(); ++j) {
+      if (!boxes_overlap(box[i], box[j])) continue;  // no common face
+      const auto face = sim::common_face(model.tree().leaf(leaves[i]), model.tree().leaf(leaves[j]), root);
+      if (face && model.material().face_connected(face->first, face->second)) uf.unite(int(i), int(j));
+    }
+  }
+  return uf;
+}
+
 // The surface as a sequence of edits. Every edit keeps the surviving vertices in order and appends the new ones, so
 // the current vertices are the original ones that survive (in order) and then new ones: the track needs only the
 // original indices that are gone and the number of original vertices left, not a map over all of S.
 struct SurfaceTrack {
-  sim::TriMesh mesh;                       // S after the edits so far (meaningful once `edited`)
-  std::vector<char> cut_face;              // (|F| of mesh), once `edited`
-  std::vector<int> removed;                // original indices of the original vertices that are gone, ascending
-  std::size_t kept = 0;                    // mesh.vertices[0, kept) are original vertices
-  bool edited = false;
+  sim::TriMesh mesh;         // S after the edits so far (empty before the first one)
+  std::vector<char> cut_face;  // (|F| of mesh)
+  std::vector<int> removed;  // original indices of the original vertices that are gone, ascending
+  std::size_t kept = 0;      // mesh.vertices[0, kept) are original vertices
 
   explicit SurfaceTrack(std::size_t original_vertices) : kept(original_vertices) {}
 
@@ -97,14 +96,14 @@ struct SurfaceTrack {
   // Applies one boolean result to `current_flags` (the cut-face flags of the surface it was computed on).
   void apply(SurfaceCutResult&& r, const std::vector<char>& current_flags) {
     forget(r.removed_vertices);
+    // A blade triangle is a cut face; a piece of an old triangle is one when that was (flags missing count as 0).
     std::vector<char> flags(r.mesh.triangles.size(), 1);
     for (std::size_t f = 0; f < flags.size(); ++f) {
       const int o = r.triangle_origin[f];
-      flags[f] = o < 0 || std::size_t(o) >= current_flags.size() ? char(o < 0) : current_flags[std::size_t(o)];
+      if (o >= 0) flags[f] = std::size_t(o) < current_flags.size() ? current_flags[std::size_t(o)] : 0;
     }
     cut_face = std::move(flags);
     mesh = std::move(r.mesh);
-    edited = true;
   }
 
   // Removes the given triangles and the vertices nothing uses any more, keeping the order of the rest.
@@ -163,15 +162,10 @@ std::vector<int> triangle_components(const sim::TriMesh& mesh, int& count) {
 // leaf of its own component, nothing is flagged and the cut is not restricted.
 std::vector<char> foreign_leaves(const sim::ObjectModel& model, const BladeVolume& blade,
                                  const std::vector<int>& component) {
-  const sim::RootGeometry& root = model.root();
-  std::vector<int> reach;     // leaves under the blade (rest space)
-  std::vector<sim::Box3> box; // their rest boxes, m
+  std::vector<int> reach;  // leaves under the blade (rest space)
   for (int e = 0; e < model.num_elements(); ++e) {
-    const sim::Box3 b = root.cell_box(model.tree().leaf(e));
-    if (boxes_overlap(b, blade.bounds()) && blade.overlaps_box(b)) {
-      reach.push_back(e);
-      box.push_back(b);
-    }
+    const sim::Box3 b = model.root().cell_box(model.tree().leaf(e));
+    if (boxes_overlap(b, blade.bounds()) && blade.overlaps_box(b)) reach.push_back(e);
   }
   std::vector<char> own(reach.size(), 0);  // in the component (both lists ascending)
   bool all_own = true;
@@ -180,14 +174,7 @@ std::vector<char> foreign_leaves(const sim::ObjectModel& model, const BladeVolum
     all_own = all_own && own[i];
   }
   if (all_own) return {};
-  UnionFind uf(int(reach.size()));
-  for (std::size_t i = 0; i < reach.size(); ++i) {
-    for (std::size_t j = i + 1; j < reach.size(); ++j) {
-      if (!boxes_overlap(box[i], box[j])) continue;
-      const auto face = sim::common_face(model.tree().leaf(reach[i]), model.tree().leaf(reach[j]), root);
-      if (face && model.material().face_connected(face->first, face->second)) uf.unite(int(i), int(j));
-    }
-  }
+  UnionFind uf = material_groups(model, reach);
   std::vector<char> legit(reach.size(), 0);  // per root
   bool any_own = false;
   for (std::size_t i = 0; i < reach.size(); ++i) {
@@ -407,13 +394,7 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
       return finish("no-op", "the blade meets no element");
     }
     // Components: touched leaves that share a face through which material connects.
-    UnionFind uf(int(touched.size()));
-    for (std::size_t i = 0; i < touched.size(); ++i) {
-      for (std::size_t j = i + 1; j < touched.size(); ++j) {
-        const auto face = sim::common_face(model.tree().leaf(touched[i]), model.tree().leaf(touched[j]), root);
-        if (face && model.material().face_connected(face->first, face->second)) uf.unite(int(i), int(j));
-      }
-    }
+    UnionFind uf = material_groups(model, touched);
     std::vector<std::vector<int>> groups;
     {
       std::vector<int> gid(touched.size(), -1);

@@ -26,6 +26,7 @@
 #include "octocut/cutting/surface_cut.hpp"
 
 #include "cgal_exact.hpp"  // first: the exact number type of Epeck
+#include "union_find.hpp"
 
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Polygon_mesh_processing/corefinement.h>
@@ -697,28 +698,18 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
       const auto local = [&](int32_t v) {
         return static_cast<int>(std::lower_bound(vertices.begin(), vertices.end(), v) - vertices.begin());
       };
-      std::vector<int> parent(vertices.size());
-      std::iota(parent.begin(), parent.end(), 0);
-      const auto find = [&](int x) {
-        while (parent[static_cast<std::size_t>(x)] != x) {
-          parent[static_cast<std::size_t>(x)] = parent[static_cast<std::size_t>(parent[static_cast<std::size_t>(x)])];
-          x = parent[static_cast<std::size_t>(x)];
-        }
-        return x;
-      };
+      detail::UnionFind groups(static_cast<int>(vertices.size()));
       for (const int32_t f : clear) {
         const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
-        for (int k = 1; k < 3; ++k) {
-          const int a = find(local(t[0])), b = find(local(t[static_cast<std::size_t>(k)]));
-          if (a != b) parent[static_cast<std::size_t>(std::max(a, b))] = std::min(a, b);
-        }
+        groups.unite(local(t[0]), local(t[1]));
+        groups.unite(local(t[0]), local(t[2]));
       }
       using Side_of = CGAL::Side_of_triangle_mesh<Mesh, Kernel>;
       const Side_of::AABB_tree tree(bmesh.faces().begin(), bmesh.faces().end(), bmesh);
       const Side_of inside_blade(tree);
       std::vector<char> side(vertices.size(), 0);  // per root: 1 inside, 2 outside
       for (const int32_t f : clear) {
-        const int r = find(local(surface.triangles[static_cast<std::size_t>(f)][0]));
+        const int r = groups.find(local(surface.triangles[static_cast<std::size_t>(f)][0]));
         char& sr = side[static_cast<std::size_t>(r)];
         if (sr == 0) {
           const CGAL::Bounded_side b = inside_blade(to_point(surface.vertices[static_cast<std::size_t>(vertices[static_cast<std::size_t>(r)])]));

@@ -19,6 +19,7 @@
 #include "octocut/cutting/mesh_check.hpp"
 #include "octocut/engine/mesh_io.hpp"
 #include "octocut/sim/surface.hpp"
+#include "../common/shapes.hpp"
 #include "test_meshes.hpp"
 #include "watertight.hpp"
 
@@ -60,7 +61,7 @@ TriMesh cylinder(double cx, double cy, double r, double z0, double z1, int n = 3
   return m;
 }
 
-double polygon_area(double r, int n) { return 0.5 * n * r * r * std::sin(2.0 * std::numbers::pi / n); }
+using test::prism_area;  // the area of the regular n-gon of circumradius r, m^2
 
 // Bookkeeping: kept vertices unchanged and in order, inserted == tail, origins in range and coplanar with the old
 // triangle, removed volume equal to the volume difference.
@@ -289,10 +290,10 @@ TEST(SurfaceCut, CylinderPunchThroughABoxHasTheAnalyticVolume) {
   const TriMesh s = test::grid_cube(8, e);
   const SurfaceCutResult through = cut_surface(s, cylinder(0.0053, 0.0047, r, -0.002, 0.012));
   expect_valid_cut(s, through, "through");
-  EXPECT_NEAR(through.removed_volume, polygon_area(r, 32) * e, 1e-9 * e * e * e);
+  EXPECT_NEAR(through.removed_volume, prism_area(r, 32) * e, 1e-9 * e * e * e);
   const SurfaceCutResult partial = cut_surface(s, cylinder(0.0053, 0.0047, r, 0.003, 0.012));
   expect_valid_cut(s, partial, "partial");
-  EXPECT_NEAR(partial.removed_volume, polygon_area(r, 32) * (e - 0.003), 1e-9 * e * e * e);
+  EXPECT_NEAR(partial.removed_volume, prism_area(r, 32) * (e - 0.003), 1e-9 * e * e * e);
   EXPECT_GT(partial.patch_triangles, 0);
   EXPECT_LT(partial.patch_triangles, static_cast<int>(s.triangles.size()) / 10);
 }
@@ -316,7 +317,7 @@ TEST(SurfaceCut, FiftyPunchesAtOneSpotStayValid) {
     }
   }
   EXPECT_GE(ok, 1);
-  EXPECT_NEAR(v0 - sim::signed_volume(s), polygon_area(r, 24) * (e - 0.004), 1e-9 * e * e * e);
+  EXPECT_NEAR(v0 - sim::signed_volume(s), prism_area(r, 24) * (e - 0.004), 1e-9 * e * e * e);
 }
 
 TEST(SurfaceCut, SixPunchesAtDifferentSpots) {
@@ -328,7 +329,7 @@ TEST(SurfaceCut, SixPunchesAtDifferentSpots) {
     const double x = 0.0015 + 0.0014 * i, y = 0.002 + 0.001 * i, depth = 0.002 + 0.001 * i;
     const SurfaceCutResult c = cut_surface(s, cylinder(x, y, r, e - depth, e + 0.002, 20));
     expect_valid_cut(s, c, "punch " + std::to_string(i));
-    expected += polygon_area(r, 20) * depth;
+    expected += prism_area(r, 20) * depth;
     s = c.mesh;
   }
   EXPECT_NEAR(v0 - sim::signed_volume(s), expected, 1e-9 * e * e * e);
@@ -450,13 +451,13 @@ TEST(SurfaceCut, RemovableRestrictsTheCutToWhereItSaysYes) {
   const TriMesh b = cylinder(0.0053, 0.0047, r, -0.002, 0.025);
   const SurfaceCutResult both = cut_surface(s, b);
   expect_valid_cut(s, both, "both");
-  EXPECT_NEAR(both.removed_volume, 2.0 * polygon_area(r, 32) * e, 1e-9 * e * e * e);
+  EXPECT_NEAR(both.removed_volume, 2.0 * prism_area(r, 32) * e, 1e-9 * e * e * e);
 
   SurfaceCutOptions lower_only;
   lower_only.removable = [](const Vec3& p) { return p.z() < 0.011; };
   const SurfaceCutResult lower = cut_surface(s, b, lower_only);
   expect_valid_cut(s, lower, "lower only");
-  EXPECT_NEAR(lower.removed_volume, polygon_area(r, 32) * e, 1e-9 * e * e * e);
+  EXPECT_NEAR(lower.removed_volume, prism_area(r, 32) * e, 1e-9 * e * e * e);
   EXPECT_NEAR(sim::signed_volume(lower.mesh), sim::signed_volume(s) - lower.removed_volume, 1e-15);
   // No blade face (cut face) lies in the upper cube, and the upper cube keeps its volume: the vertices above
   // z = 11 mm bound the same solid.
@@ -507,7 +508,7 @@ TEST(SurfaceCut, PartialPunchIntoTheMeniscus) {
   const SurfaceCutResult r = cut_surface(s, rim_punch(270.0, 0.0005));
   expect_valid_cut(s, r, "meniscus");
   EXPECT_GT(r.removed_volume, 0.0);
-  EXPECT_LT(r.removed_volume, polygon_area(0.001, 32) * (0.012 - 0.0005));
+  EXPECT_LT(r.removed_volume, prism_area(0.001, 32) * (0.012 - 0.0005));
   EXPECT_LT(r.patch_triangles, static_cast<int>(s.triangles.size()) / 10);
   EXPECT_FALSE(r.removed_vertices.empty());
   EXPECT_FALSE(r.inserted_vertices.empty());

@@ -15,7 +15,7 @@
 #include "octocut/cutting/shape_matching.hpp"
 #include "octocut/cutting/surface_cut.hpp"
 #include "octocut/sim/dof_map.hpp"
-#include "union_find.hpp"
+#include "octocut/sim/disjoint_sets.hpp"
 
 namespace octocut::cutting {
 
@@ -28,7 +28,7 @@ double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
-using detail::UnionFind;
+using UnionFind = sim::DisjointSets;  // union-find; the root of a set is its smallest member
 
 bool boxes_overlap(const sim::Box3& a, const sim::Box3& b) {
   return (a.min.array() <= b.max.array()).all() && (b.min.array() <= a.max.array()).all();
@@ -42,7 +42,7 @@ UnionFind material_groups(const sim::ObjectModel& model, const std::vector<int>&
   const sim::RootGeometry& root = model.root();
   std::vector<sim::Box3> box(leaves.size());  // rest boxes, m
   for (std::size_t i = 0; i < leaves.size(); ++i) box[i] = root.cell_box(model.tree().leaf(leaves[i]));
-  UnionFind uf(int(leaves.size()));
+  UnionFind uf(leaves.size());
   for (std::size_t i = 0; i < leaves.size(); ++i) {
     for (std::size_t j = i + 1; j < leaves.size(); ++j) {
       if (!boxes_overlap(box[i], box[j])) continue;  // no common face
@@ -139,7 +139,7 @@ struct SurfaceTrack {
 
 // Connected components of a triangle mesh's triangles (through shared vertices): component of each triangle (|F|).
 std::vector<int> triangle_components(const sim::TriMesh& mesh, int& count) {
-  UnionFind uf(int(mesh.vertices.size()));
+  UnionFind uf(mesh.vertices.size());
   for (const auto& t : mesh.triangles) {
     uf.unite(t[0], t[1]);
     uf.unite(t[0], t[2]);

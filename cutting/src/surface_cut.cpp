@@ -26,7 +26,6 @@
 #include "octocut/cutting/surface_cut.hpp"
 
 #include "cgal_exact.hpp"  // first: the exact number type of Epeck
-#include "union_find.hpp"
 
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Polygon_mesh_processing/corefinement.h>
@@ -53,6 +52,8 @@
 #include <unordered_map>
 #include <utility>
 #include <vector>
+
+#include "octocut/sim/disjoint_sets.hpp"
 
 namespace octocut::cutting {
 namespace {
@@ -698,7 +699,7 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
       const auto local = [&](int32_t v) {
         return static_cast<int>(std::lower_bound(vertices.begin(), vertices.end(), v) - vertices.begin());
       };
-      detail::UnionFind groups(static_cast<int>(vertices.size()));
+      sim::DisjointSets groups(vertices.size());
       for (const int32_t f : clear) {
         const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
         groups.unite(local(t[0]), local(t[1]));

@@ -1,5 +1,7 @@
 #include "octocut/sim/surface_check.hpp"
 
+#include "octocut/sim/disjoint_sets.hpp"
+
 #include <algorithm>
 #include <numeric>
 #include <stdexcept>
@@ -15,30 +17,6 @@ struct EdgeUse {
   int32_t hi = 0;        ///< larger vertex index
   int32_t triangle = 0;  ///< the triangle that uses the edge
   bool forward = false;  ///< the triangle runs lo -> hi (false: hi -> lo)
-};
-
-/// Union-find over 0..n-1 with path halving; the smaller index becomes the root, so results are order-independent.
-class DisjointSets {
- public:
-  explicit DisjointSets(std::size_t n) : m_parent(n) { std::iota(m_parent.begin(), m_parent.end(), 0); }
-  int32_t find(int32_t i) {
-    while (m_parent[static_cast<std::size_t>(i)] != i) {
-      const auto u = static_cast<std::size_t>(i);
-      m_parent[u] = m_parent[static_cast<std::size_t>(m_parent[u])];
-      i = m_parent[u];
-    }
-    return i;
-  }
-  void unite(int32_t a, int32_t b) {
-    a = find(a);
-    b = find(b);
-    if (a == b) return;
-    if (a < b) std::swap(a, b);
-    m_parent[static_cast<std::size_t>(a)] = b;
-  }
-
- private:
-  std::vector<int32_t> m_parent;  ///< parent of each element (n)
 };
 
 /// True when the triangle names one vertex twice; such a triangle has no proper edges.

@@ -2,8 +2,9 @@
 //
 // Algorithm:
 //  1. The faces of S whose bounding box meets the grown bounding box G of the blade are found with vertex outcodes
-//     (one pass over the vertices and one over the faces). Of those, the patch P is the faces that may touch the
-//     blade (a conservative plane-side test against the blade triangles near them); the others lie strictly inside
+//     against G grown by the faces' size (one pass over the vertices and one over the faces, then a box test on the
+//     few faces near G). Of those, the patch P is the faces that may touch the blade (a conservative plane-side
+//     test against the blade triangles near them); the others lie strictly inside
 //     or strictly outside the blade, are grouped through shared vertices and classified with one exact point query
 //     per group: the inside ones go whole, the outside ones stay. A face outside G cannot touch the blade, so P's
 //     boundary edges stay untouched. Where P's faces would form several fans around a vertex, the faces around it
@@ -550,33 +551,43 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
     face_box(t, lo, hi);
     reach = std::max(reach, 4.0 * (hi - lo).maxCoeff());
   }
-  // One pass over the vertices computes Cohen-Sutherland outcodes against G (bits 0-5) and G grown by reach
-  // (bits 6-11), and checks that the coordinates are finite (NaN and infinity propagate into the sum). A face's box
-  // misses a box exactly when its three vertices share an outside bit, so the pass over the faces reads 3 codes
-  // instead of 9 coordinates.
-  std::vector<uint16_t> outcode(static_cast<std::size_t>(nv));  // (|V|)
+  // One pass over the vertices computes Cohen-Sutherland outcodes against R, G grown by reach, from the sign bits of
+  // the differences (exact: a rounded difference keeps its sign, and is zero only for equal numbers), and checks that
+  // the coordinates are finite. A face's box misses R exactly when its three vertices share an outside bit; only the
+  // few faces whose boxes meet R are then tested against G itself. The pass reads S once and writes a byte per
+  // vertex.
+  std::vector<uint8_t> outcode(static_cast<std::size_t>(nv));  // (|V|)
   {
     const Vec3 rmin = gmin.array() - reach, rmax = gmax.array() + reach;  // m
-    double sum = 0.0;
+    const auto sign = [](double d) {  // 1 for a negative difference, 0 otherwise (NaN is caught below)
+      return static_cast<unsigned>(std::bit_cast<uint64_t>(d) >> 63);
+    };
+    const auto exponent_full = [](double d) {  // infinity or NaN
+      return (std::bit_cast<uint64_t>(d) & 0x7ff0000000000000ull) == 0x7ff0000000000000ull;
+    };
+    bool non_finite = false;
     for (int32_t v = 0; v < nv; ++v) {
       const Vec3& p = surface.vertices[static_cast<std::size_t>(v)];
-      sum += p.x() + p.y() + p.z();
-      outcode[static_cast<std::size_t>(v)] = static_cast<uint16_t>(
-          (p.x() < gmin.x()) | (p.x() > gmax.x()) << 1 | (p.y() < gmin.y()) << 2 | (p.y() > gmax.y()) << 3 |
-          (p.z() < gmin.z()) << 4 | (p.z() > gmax.z()) << 5 | (p.x() < rmin.x()) << 6 | (p.x() > rmax.x()) << 7 |
-          (p.y() < rmin.y()) << 8 | (p.y() > rmax.y()) << 9 | (p.z() < rmin.z()) << 10 | (p.z() > rmax.z()) << 11);
+      non_finite |= exponent_full(p.x()) | exponent_full(p.y()) | exponent_full(p.z());
+      outcode[static_cast<std::size_t>(v)] = static_cast<uint8_t>(
+          sign(p.x() - rmin.x()) | sign(rmax.x() - p.x()) << 1 | sign(p.y() - rmin.y()) << 2 |
+          sign(rmax.y() - p.y()) << 3 | sign(p.z() - rmin.z()) << 4 | sign(rmax.z() - p.z()) << 5);
     }
-    if (!std::isfinite(sum)) check_input(surface, "surface");
+    if (non_finite) check_input(surface, "surface");
   }
   std::vector<int32_t> patch;       // face indices of S, ascending
   std::vector<int32_t> near_faces;  // faces of S outside P within `reach` of G, ascending
   for (int32_t f = 0; f < nf; ++f) {
     const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
     if (!index_ok(t)) check_input(surface, "surface");
-    const unsigned shared = outcode[static_cast<std::size_t>(t[0])] & outcode[static_cast<std::size_t>(t[1])] &
-                            outcode[static_cast<std::size_t>(t[2])];
-    if (shared == 0) patch.push_back(f);
-    else if ((shared & 0xfc0u) == 0) near_faces.push_back(f);
+    if ((outcode[static_cast<std::size_t>(t[0])] & outcode[static_cast<std::size_t>(t[1])] &
+         outcode[static_cast<std::size_t>(t[2])]) != 0) {
+      continue;
+    }
+    Vec3 lo, hi;
+    face_box(t, lo, hi);
+    const bool meets_g = (lo.array() <= gmax.array()).all() && (hi.array() >= gmin.array()).all();
+    (meets_g ? patch : near_faces).push_back(f);
   }
   // Of the faces in G, CGAL gets only those that may touch the blade: a face is left out (`clear`) when, against
   // every blade triangle whose grown box its box meets, one of the two triangles lies strictly on one side of the

@@ -497,23 +497,10 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
       sopt.removable = nullptr;
       if (!foreign[k].empty())
         sopt.removable = [&model, &f = foreign[k]](const sim::Vec3& p) { return !in_foreign(model, f, p); };
-      SurfaceCutResult r = cut_surface(current, b, sopt);
-      // A degenerate configuration that the boolean refuses (a blade edge through a surface edge at a point, say)
-      // is retried with the blade translated by 1e-9, then 1e-7, of its size along a fixed generic direction:
-      // simulation of simplicity in its simplest form, deterministic, and far below any tissue scale.
-      for (double eps : {1e-9, 1e-7}) {
-        if (r.status != SurfaceCutStatus::failed) break;
-        const sim::Box3 bb = sim::bounds(b);
-        const sim::Vec3 shift = eps * (bb.max - bb.min).norm() * sim::Vec3(0.5377, 0.8314, 0.1410).normalized();
-        sim::TriMesh moved = b;
-        for (sim::Vec3& p : moved.vertices) p += shift;
-        SurfaceCutResult again = cut_surface(current, moved, sopt);
-        if (again.status != SurfaceCutStatus::failed) {
-          b = std::move(moved);
-          ++out.perturbed;
-        }
-        r = std::move(again);
-      }
+      // A degenerate configuration that the boolean refuses is retried with the blade moved by 1e-9, then 1e-7,
+      // of its size; the blade that was used is the one the model stages must use too.
+      auto [r, moves] = cut_surface_perturbing(current, b, sopt);
+      if (moves > 0) ++out.perturbed;
       if (r.status == SurfaceCutStatus::failed) throw StageFailure("surface: " + r.reason);
       if (r.status == SurfaceCutStatus::no_op) continue;
       out.removed_volume += r.removed_volume;

@@ -1287,4 +1287,28 @@ SurfaceCutResult cut_surface(const sim::TriMesh& surface, const sim::TriMesh& bl
   return result;
 }
 
+std::pair<SurfaceCutResult, int> cut_surface_perturbing(const sim::TriMesh& surface, sim::TriMesh& blade,
+                                                        const SurfaceCutOptions& options) {
+  SurfaceCutResult first = cut_surface(surface, blade, options);
+  if (first.status != SurfaceCutStatus::failed || blade.vertices.empty()) return {std::move(first), 0};
+  const sim::Box3 bb = sim::bounds(blade);
+  const Vec3 direction = Vec3(0.5377, 0.8314, 0.1410).normalized();
+  int moves = 0;
+  for (const double eps : {1e-9, 1e-7}) {
+    ++moves;
+    sim::TriMesh moved = blade;
+    const Vec3 shift = eps * (bb.max - bb.min).norm() * direction;  // m
+    for (Vec3& p : moved.vertices) p += shift;
+    SurfaceCutResult again = cut_surface(surface, moved, options);
+    if (again.status != SurfaceCutStatus::failed) {
+      blade = std::move(moved);
+      again.ms += first.ms;
+      return {std::move(again), moves};
+    }
+    first.ms += again.ms;
+  }
+  first.reason += " (also with the blade moved by 1e-9 and 1e-7 of its size)";
+  return {std::move(first), 0};
+}
+
 }  // namespace octocut::cutting

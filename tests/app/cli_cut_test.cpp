@@ -70,6 +70,7 @@ TEST_F(CutCli, PunchThroughACubeReportsTheExactVolume) {
   EXPECT_EQ(j["closed"], true);
   EXPECT_EQ(j["self_intersecting"], false);
   EXPECT_EQ(j["components"], 1);
+  EXPECT_EQ(j["blade_perturbed"], 0);  // a generic position: the blade was used as it is
   EXPECT_GT(j["material_graph"]["tets_removed"].get<int>(), 0);
   for (const char* k : {"surface", "material_graph", "total"}) EXPECT_GE(j["ms"][k].get<double>(), 0.0) << k;
   // The output is in metres, closed, and has the reported volume (to single precision, as read back).

@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "octocut/sim/surface.hpp"
@@ -68,5 +69,14 @@ struct SurfaceCutResult {
 /// failed with a reason; it never throws.
 SurfaceCutResult cut_surface(const sim::TriMesh& surface, const sim::TriMesh& blade,
                              const SurfaceCutOptions& options = {});
+
+/// cut_surface for blades in degenerate positions. The exact result is rounded to doubles, and in a degenerate
+/// configuration two distinct intersection points can round to one (a blade vertex a few ulps from a surface edge,
+/// say), which the cut then refuses. A failed cut is retried with the blade translated by 1e-9, then 1e-7, of its
+/// bounding-box diagonal along a fixed generic direction: simulation of simplicity in its simplest form,
+/// deterministic, and far below any tissue scale. `blade` becomes the blade that was used, and the return value's
+/// second member counts the moves (0: none; 1 or 2). When every attempt fails, the reason is the first attempt's.
+std::pair<SurfaceCutResult, int> cut_surface_perturbing(const sim::TriMesh& surface, sim::TriMesh& blade,
+                                                        const SurfaceCutOptions& options = {});
 
 }  // namespace octocut::cutting

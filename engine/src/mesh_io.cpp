@@ -1,7 +1,9 @@
 // Mesh files (SPEC §2.4): import through assimp, deterministic welding, validation, and export by extension.
 // assimp is confined to this file.
+#include <assimp/DefaultLogger.hpp>
 #include <assimp/Exporter.hpp>
 #include <assimp/Importer.hpp>
+#include <assimp/LogStream.hpp>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 
@@ -11,6 +13,8 @@
 #include <cmath>
 #include <cstdint>
 #include <memory>
+#include <mutex>
+#include <string>
 #include <numeric>
 #include <optional>
 #include <stdexcept>
@@ -26,6 +30,54 @@ namespace octocut::engine {
 namespace {
 
 namespace fs = std::filesystem;
+
+/// The first error-level message of an assimp import. Some importers repair malformed input silently and only log
+/// an error: OFF clamps an out-of-range vertex index to the last vertex and drops faces without indices, OBJ skips
+/// bad indices. Such a file is rejected rather than loaded as a different mesh.
+class ImportErrors : public Assimp::LogStream {
+ public:
+  void write(const char* message) override {
+    if (!first_.empty() || message == nullptr) return;
+    std::string m(message);
+    // Missing or unsupported materials and textures do not change the geometry.
+    for (const char* benign : {"material", "Material", "texture", "Texture", "illumination"}) {
+      if (m.find(benign) != std::string::npos) return;
+    }
+    while (!m.empty() && (m.back() == '\n' || m.back() == '\r')) m.pop_back();
+    // assimp prefixes "Error, T<thread>: ".
+    if (const auto colon = m.find(": "); m.rfind("Error", 0) == 0 && colon != std::string::npos) m.erase(0, colon + 2);
+    first_ = m;
+  }
+  [[nodiscard]] const std::string& first() const { return first_; }
+
+ private:
+  std::string first_;
+};
+
+/// Attaches an ImportErrors stream to assimp's (process-wide) logger for the lifetime of the object; imports are
+/// serialised, since the logger is shared.
+class CaptureImportErrors {
+ public:
+  CaptureImportErrors() : lock_(mutex()) {
+    Assimp::DefaultLogger::create("", Assimp::Logger::NORMAL, 0);  // no default streams (no file, no console)
+    Assimp::DefaultLogger::get()->attachStream(&errors_, Assimp::Logger::Err);
+  }
+  ~CaptureImportErrors() {
+    Assimp::DefaultLogger::get()->detachStream(&errors_, Assimp::Logger::Err);  // gives the stream back
+    Assimp::DefaultLogger::kill();
+  }
+  CaptureImportErrors(const CaptureImportErrors&) = delete;
+  CaptureImportErrors& operator=(const CaptureImportErrors&) = delete;
+  [[nodiscard]] const std::string& first() const { return errors_.first(); }
+
+ private:
+  static std::mutex& mutex() {
+    static std::mutex m;
+    return m;
+  }
+  std::lock_guard<std::mutex> lock_;
+  ImportErrors errors_;
+};
 
 /// An affine transform in double precision: x' = linear * x + offset.
 struct Affine {
@@ -386,10 +438,12 @@ LoadedMesh load_mesh(const fs::path& path, const MeshLoadOptions& options) {
 
   // Let assimp parse and triangulate; welding and validation are ours.
   Assimp::Importer importer;
+  const CaptureImportErrors errors;
   const aiScene* scene = importer.ReadFile(file, aiProcess_Triangulate | aiProcess_ValidateDataStructure);
   if (scene == nullptr) {
     throw MeshError(file + ": cannot read mesh (unknown format or corrupt file): " + importer.GetErrorString());
   }
+  if (!errors.first().empty()) throw MeshError(file + ": malformed mesh: " + errors.first());
 
   // Merge every mesh of the node tree, apply the scale, weld.
   std::vector<sim::Vec3> positions;

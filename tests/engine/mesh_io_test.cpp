@@ -414,6 +414,25 @@ TEST_F(MeshIoTest, MissingEmptyAndGarbageFilesAreClearErrors) {
   }
 }
 
+TEST_F(MeshIoTest, IndicesThatTheImporterWouldRepairAreErrors) {
+  // assimp's OFF reader clamps an out-of-range index to the last vertex (which here would still make a closed
+  // tetrahedron) and drops a face without indices; OBJ's reader rejects a bad index itself. Each is a malformed
+  // file, never a different mesh.
+  const std::string out_of_range = "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 99\n";
+  std::string message = load_error(write("clamped.off", out_of_range));
+  EXPECT_TRUE(has(message, "clamped.off: ")) << message;
+  EXPECT_TRUE(has(message, "out of range")) << message;
+  const std::string zero_face = std::string(kTetraOff).substr(0, std::string(kTetraOff).size() - 8) + "0\n";
+  message = load_error(write("zero.off", zero_face));
+  EXPECT_TRUE(has(message, "zero.off: ")) << message;
+  const std::string obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 9\n";
+  message = load_error(write("bad.obj", obj));
+  EXPECT_TRUE(has(message, "bad.obj: ")) << message;
+  // A missing material library changes nothing in the geometry: the mesh loads.
+  const std::string with_mtl = "mtllib missing.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+  EXPECT_NEAR(sim::signed_volume(load_mesh(write("mtl.obj", with_mtl)).mesh), 1.0 / 6.0, 1e-15);
+}
+
 TEST_F(MeshIoTest, FileWithoutTrianglesIsAnError) {
   const std::string obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2\nl 2 3\n";
   const std::string message = load_error(write("lines.obj", obj));

@@ -156,29 +156,40 @@ std::vector<int> triangle_components(const sim::TriMesh& mesh, int& count) {
 
 // SPEC §4 stage 2: B'_i cuts only the material of component i. Returns one flag per leaf of `model` (empty when
 // no leaf is flagged): the leaves whose rest boxes meet the rest-space blade, grouped by material connectivity
-// (face-connected leaves whose common face material crosses), and flagged when their group holds none of the
-// component's leaves. Such material lies under B'_i in rest space only: in the deformed state the blade never
-// touched it (a part folded or pushed away from where the component's transform puts the blade). When B'_i meets no
-// leaf of its own component, nothing is flagged and the cut is not restricted.
+// (face-connected leaves whose common face material crosses) within a neighbourhood of the blade, and flagged when
+// their group holds none of the component's leaves. Such material lies under B'_i in rest space only: in the
+// deformed state the blade never touched it (a part folded or pushed away from where the component's transform puts
+// the blade). The neighbourhood is the blade's box grown by two of the largest leaf edges under it, so that a leaf
+// at the blade's fringe whose material reaches the component just outside the box (around the rim of a thin part,
+// say) counts as the component's own. When B'_i meets no leaf of its own component, nothing is flagged and the cut
+// is not restricted.
 std::vector<char> foreign_leaves(const sim::ObjectModel& model, const BladeVolume& blade,
                                  const std::vector<int>& component) {
-  std::vector<int> reach;  // leaves under the blade (rest space)
+  std::vector<int> reach;  // leaves under the blade (rest space), ascending
+  double h = 0.0;          // largest edge among them, m
   for (int e = 0; e < model.num_elements(); ++e) {
     const sim::Box3 b = model.root().cell_box(model.tree().leaf(e));
-    if (boxes_overlap(b, blade.bounds()) && blade.overlaps_box(b)) reach.push_back(e);
+    if (boxes_overlap(b, blade.bounds()) && blade.overlaps_box(b)) {
+      reach.push_back(e);
+      h = std::max(h, model.edge()[std::size_t(e)]);
+    }
   }
-  std::vector<char> own(reach.size(), 0);  // in the component (both lists ascending)
-  bool all_own = true;
-  for (std::size_t i = 0; i < reach.size(); ++i) {
-    own[i] = std::binary_search(component.begin(), component.end(), reach[i]);
-    all_own = all_own && own[i];
+  const auto own = [&](int e) { return std::binary_search(component.begin(), component.end(), e); };
+  if (std::all_of(reach.begin(), reach.end(), own)) return {};
+  // The neighbourhood: the leaves under the blade first, then the others whose boxes meet the grown box.
+  const sim::Box3 near{blade.bounds().min.array() - 2.0 * h, blade.bounds().max.array() + 2.0 * h};
+  std::vector<int> context = reach;
+  for (int e = 0; e < model.num_elements(); ++e) {
+    if (boxes_overlap(model.root().cell_box(model.tree().leaf(e)), near) &&
+        !std::binary_search(reach.begin(), reach.end(), e)) {
+      context.push_back(e);
+    }
   }
-  if (all_own) return {};
-  UnionFind uf = material_groups(model, reach);
-  std::vector<char> legit(reach.size(), 0);  // per root
+  UnionFind uf = material_groups(model, context);
+  std::vector<char> legit(context.size(), 0);  // per root
   bool any_own = false;
-  for (std::size_t i = 0; i < reach.size(); ++i) {
-    if (!own[i]) continue;
+  for (std::size_t i = 0; i < context.size(); ++i) {
+    if (!own(context[i])) continue;
     legit[std::size_t(uf.find(int(i)))] = 1;
     any_own = true;
   }
@@ -490,6 +501,7 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     // S checked once, and changed since only by verified cuts (which check every changed face against its
     // neighbours), stays free of self-intersections: CGAL need not check it again.
     sopt.check_surface_self_intersection = !object.surface_checked;
+    std::vector<char> unrestricted(rest_blades.size(), 0);  // per blade: its restriction was dropped
     for (std::size_t k = 0; k < rest_blades.size(); ++k) {
       sim::TriMesh& b = rest_blades[k];
       const sim::TriMesh& current = surface_changed ? track.mesh : object.surface;
@@ -500,6 +512,23 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
       // A degenerate configuration that the boolean refuses is retried with the blade moved by 1e-9, then 1e-7,
       // of its size; the blade that was used is the one the model stages must use too.
       auto [r, moves] = cut_surface_perturbing(current, b, sopt);
+      // The restriction decides per region of S and of the blade, by one point each, and leaves are coarser than
+      // S: where a region straddles the border of the foreign material, the kept pieces need not close up and the
+      // boolean refuses its result. B'_i then cuts without the restriction (as if nothing were foreign), and the
+      // model stages run again without it too.
+      if (r.status == SurfaceCutStatus::failed && sopt.removable) {
+        sopt.removable = nullptr;
+        sim::TriMesh unrestricted_blade = b;
+        auto [again, again_moves] = cut_surface_perturbing(current, unrestricted_blade, sopt);
+        if (again.status != SurfaceCutStatus::failed) {
+          b = std::move(unrestricted_blade);
+          r = std::move(again);
+          moves = again_moves;
+          unrestricted[k] = 1;
+          ++out.unrestricted;
+          --out.restricted_components;
+        }
+      }
       if (moves > 0) ++out.perturbed;
       if (r.status == SurfaceCutStatus::failed) throw StageFailure("surface: " + r.reason);
       if (r.status == SurfaceCutStatus::no_op) continue;
@@ -515,10 +544,14 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     }
 
     model_known.wait();
-    // A perturbed blade removes material where it now is: the model stages run again, here, with the blades used.
-    if (out.perturbed > 0) {
+    // A perturbed blade removes material where it now is, and one whose restriction was dropped removes all the
+    // material under it: the model stages run again, here, with the blades and restrictions used.
+    if (out.perturbed > 0 || out.unrestricted > 0) {
       model_thread.request_stop();
       if (model_thread.joinable()) model_thread.join();
+      for (std::size_t k = 0; k < unrestricted.size(); ++k) {
+        if (unrestricted[k]) foreign[k].clear();
+      }
       work = ModelWork{};
       model_stages(work, rest_blades, nullptr, [] { return false; });
     }

@@ -50,6 +50,7 @@ std::string report_json(const Report& r) {
                          {"reason", c.reason.empty() ? ojson(nullptr) : ojson(c.reason)},
                          {"components", c.components},
                          {"restricted_components", c.restricted_components},
+                         {"unrestricted_components", c.unrestricted_components},
                          {"removed_volume_m3", num(c.removed_volume_m3)},
                          {"tets_removed", c.tets_removed},
                          {"leaves_refined", c.leaves_refined},

@@ -477,6 +477,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
         c.reason = o.reason;
         c.components = o.components;
         c.restricted_components = o.restricted_components;
+        c.unrestricted_components = o.unrestricted;
         c.removed_volume_m3 = o.removed_volume;
         c.tets_removed = o.tets_removed;
         c.leaves_refined = o.leaves_refined;
@@ -493,6 +494,10 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
         if (o.perturbed > 0)
           report.warnings.push_back("cut at t = " + format_seconds(ev.t) + " by " + c.tool +
                                     ": a degenerate blade position was moved by 1e-9 of the blade's size");
+        if (o.unrestricted > 0)
+          report.warnings.push_back("cut at t = " + format_seconds(ev.t) + " by " + c.tool +
+                                    ": the blade also covered other material in rest space, and could not be kept off "
+                                    "it (" + std::to_string(o.unrestricted) + " component(s)): it cut all of it");
         if (o.status == "ok") update_surface();
       }
     };

@@ -313,11 +313,9 @@ TEST(CutPipeline, LooseHalfIsRemovedAsAFragment) {
   }
 }
 
-TEST(CutPipeline, BladeCutsOnlyTheMaterialOfItsOwnComponent) {
-  // Two 21 x 21 x 3 mm slabs in one object, 3 mm apart (z in [0, 3] and [6, 9] mm, one empty 3 mm cell layer
-  // between them). The upper slab is pushed 20 mm up, and a punch from z = -2 to 8 mm goes through the lower slab
-  // only. The lower slab is at rest, so its transform is the identity and B' reaches into the upper slab's rest
-  // place: restricted to its component (SPEC §4 stage 2), the cut leaves the upper slab untouched.
+// Two 21 x 21 x 3 mm slabs of material in one object, 3 mm apart (z in [0, 3] and [6, 9] mm, one empty 3 mm cell
+// layer between them), with `surface` as S, on 3 mm base cells; the upper slab is pushed 20 mm up.
+void two_slabs(Object& o, const sim::TriMesh& surface) {
   const Box3 lower{Vec3(0, 0, 0), Vec3(0.021, 0.021, 0.003)};
   const Box3 upper{Vec3(0, 0, 0.006), Vec3(0.021, 0.021, 0.009)};
   sim::TetMesh tets = sim::box_tet_mesh(lower, 0.001);
@@ -330,9 +328,8 @@ TEST(CutPipeline, BladeCutsOnlyTheMaterialOfItsOwnComponent) {
       tets.tets.push_back(t);
     }
   }
-  Object o;
   o.cut.graph = std::make_shared<sim::MaterialGraph>(std::move(tets));
-  o.cut.surface = test::merged(sim::closed_box_grid(lower, 32), sim::closed_box_grid(upper, 32));
+  o.cut.surface = surface;
   o.cut.cut_faces.assign(o.cut.surface.triangles.size(), 0);
   o.cut.surface_checked = true;
   sim::OctreeSpec spec;
@@ -357,6 +354,17 @@ TEST(CutPipeline, BladeCutsOnlyTheMaterialOfItsOwnComponent) {
   for (std::size_t d = 0; d < st.x.size(); ++d)
     if (o.sim->model().dofs().dof_rest[d].z() > 0.0045) st.x[d].z() += 0.02;
   o.sim->set_state(st);
+}
+
+TEST(CutPipeline, BladeCutsOnlyTheMaterialOfItsOwnComponent) {
+  // Two 21 x 21 x 3 mm slabs in one object, 3 mm apart (z in [0, 3] and [6, 9] mm, one empty 3 mm cell layer
+  // between them). The upper slab is pushed 20 mm up, and a punch from z = -2 to 8 mm goes through the lower slab
+  // only. The lower slab is at rest, so its transform is the identity and B' reaches into the upper slab's rest
+  // place: restricted to its component (SPEC §4 stage 2), the cut leaves the upper slab untouched.
+  const Box3 lower{Vec3(0, 0, 0), Vec3(0.021, 0.021, 0.003)};
+  const Box3 upper{Vec3(0, 0, 0.006), Vec3(0.021, 0.021, 0.009)};
+  Object o;
+  two_slabs(o, test::merged(sim::closed_box_grid(lower, 32), sim::closed_box_grid(upper, 32)));
   const sim::TriMesh s0 = o.cut.surface;
   const int upper_tets0 = [&] {
     int n = 0;
@@ -416,6 +424,30 @@ TEST(CutPipeline, BladeCutsOnlyTheMaterialOfItsOwnComponent) {
     }
   }
   EXPECT_EQ(m.dofs().check_invariants(), "");
+}
+
+TEST(CutPipeline, RestrictionThatCannotCloseUpFallsBackToTheWholeBlade) {
+  // The two slabs of material, but one closed box as S around both (z in [0, 9] mm): S claims the empty layer
+  // between them. A punch from z = 2 to 12 mm touches the lower slab only (the upper one is pushed away), and its
+  // rest image covers the upper slab's rest place. Restricted, the boolean would keep S's top face inside the blade
+  // (foreign material) while the blade's wall, one region from z = 2 to 9 mm, starts in the lower slab: its pieces
+  // cannot close up. The cut then goes through without the restriction, says so, and S stays watertight.
+  Object o;
+  two_slabs(o, sim::closed_box_grid({Vec3(0, 0, 0), Vec3(0.021, 0.021, 0.009)}, 32));
+  const double r = 0.002;
+  const int n = 32;
+  cutting::CutOptions opt;
+  opt.fragments = cutting::FragmentPolicy::none;
+  const auto out = cut(o, prism(Vec3(0.0105, 0.0105, 0.007), r, 0.01, n), r * std::cos(std::numbers::pi / n), opt);
+  ASSERT_EQ(out.status, "ok") << out.reason;
+  EXPECT_EQ(out.components, 1);
+  EXPECT_EQ(out.unrestricted, 1);
+  EXPECT_EQ(out.restricted_components, 0);
+  const double expect = prism_area(r, n) * 0.007;  // the blade's part inside the box, z from 2 to 9 mm
+  EXPECT_NEAR(out.removed_volume, expect, 1e-9 * expect);
+  expect_watertight(o.cut.surface, "surface");
+  EXPECT_EQ(euler_characteristic(o.cut.surface), 2);  // a box with a blind hole
+  EXPECT_EQ(o.sim->model().dofs().check_invariants(), "");
 }
 
 TEST(CutPipeline, CheckedSurfaceCutsAsAnUncheckedOne) {

@@ -74,6 +74,8 @@ struct CutOutcome {
   double fragment_volume = 0.0;       ///< their material volume, m^3
   double max_blend = 0.0;             ///< largest shape-matching blend towards the rotation (0: none)
   int perturbed = 0;                  ///< blades moved by 1e-9 (or 1e-7) of their size to leave a degenerate case
+  int unrestricted = 0;               ///< of the restricted components, those whose restricted boolean could not be
+                                      ///< closed up: their blade cut all the material under it
   CutStageMs ms;
 };
 

@@ -63,6 +63,7 @@ struct CutSummary {
   std::string reason;              ///< why skipped or no-op; empty when ok
   int components = 0;              ///< material components the blade touched
   int restricted_components = 0;   ///< of those, the ones whose rest-space blade left other material alone
+  int unrestricted_components = 0; ///< of those, the ones whose restriction could not close up and was dropped
   double removed_volume_m3 = 0.0;  ///< V(S) - V(S') of the boolean, m^3
   int tets_removed = 0;            ///< tets of M removed
   int leaves_refined = 0;          ///< refine operations

@@ -356,6 +356,18 @@ void two_slabs(Object& o, const sim::TriMesh& surface) {
   o.sim->set_state(st);
 }
 
+// A 32-gon punch of circumradius 2 mm and height 10 mm, centred at (10.5, 10.5, z) mm, through the two slabs;
+// loose pieces stay.
+constexpr double kSlabPunchRadius = 0.002;  // m
+constexpr int kSlabPunchSides = 32;
+cutting::CutOutcome punch_slabs(Object& o, double z) {
+  const double r = kSlabPunchRadius;
+  const int n = kSlabPunchSides;
+  cutting::CutOptions opt;
+  opt.fragments = cutting::FragmentPolicy::none;
+  return cut(o, prism(Vec3(0.0105, 0.0105, z), r, 0.01, n), r * std::cos(std::numbers::pi / n), opt);
+}
+
 TEST(CutPipeline, BladeCutsOnlyTheMaterialOfItsOwnComponent) {
   // Two 21 x 21 x 3 mm slabs in one object, 3 mm apart (z in [0, 3] and [6, 9] mm, one empty 3 mm cell layer
   // between them). The upper slab is pushed 20 mm up, and a punch from z = -2 to 8 mm goes through the lower slab
@@ -373,11 +385,9 @@ TEST(CutPipeline, BladeCutsOnlyTheMaterialOfItsOwnComponent) {
     return n;
   }();
 
-  const double r = 0.002;
-  const int n = 32;
-  cutting::CutOptions opt;
-  opt.fragments = cutting::FragmentPolicy::none;
-  const auto out = cut(o, prism(Vec3(0.0105, 0.0105, 0.003), r, 0.01, n), r * std::cos(std::numbers::pi / n), opt);
+  const double r = kSlabPunchRadius;
+  const int n = kSlabPunchSides;
+  const auto out = punch_slabs(o, 0.003);
   ASSERT_EQ(out.status, "ok") << out.reason;
   EXPECT_EQ(out.components, 1);
   EXPECT_EQ(out.restricted_components, 1);
@@ -434,11 +444,9 @@ TEST(CutPipeline, RestrictionThatCannotCloseUpFallsBackToTheWholeBlade) {
   // cannot close up. The cut then goes through without the restriction, says so, and S stays watertight.
   Object o;
   two_slabs(o, sim::closed_box_grid({Vec3(0, 0, 0), Vec3(0.021, 0.021, 0.009)}, 32));
-  const double r = 0.002;
-  const int n = 32;
-  cutting::CutOptions opt;
-  opt.fragments = cutting::FragmentPolicy::none;
-  const auto out = cut(o, prism(Vec3(0.0105, 0.0105, 0.007), r, 0.01, n), r * std::cos(std::numbers::pi / n), opt);
+  const double r = kSlabPunchRadius;
+  const int n = kSlabPunchSides;
+  const auto out = punch_slabs(o, 0.007);
   ASSERT_EQ(out.status, "ok") << out.reason;
   EXPECT_EQ(out.components, 1);
   EXPECT_EQ(out.unrestricted, 1);

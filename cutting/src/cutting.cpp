@@ -3,9 +3,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <numeric>
 #include <functional>
 #include <future>
+#include <numeric>
 #include <optional>
 #include <stdexcept>
 #include <system_error>
@@ -43,8 +43,17 @@ UnionFind material_groups(const sim::ObjectModel& model, const std::vector<int>&
   std::vector<sim::Box3> box(leaves.size());  // rest boxes, m
   for (std::size_t i = 0; i < leaves.size(); ++i) box[i] = root.cell_box(model.tree().leaf(leaves[i]));
   UnionFind uf(leaves.size());
-  for (std::size_t i = 0; i < leaves.size(); ++i) {
-    for (std::size_t j = i + 1; j < leaves.size(); ++j) {
+  // Candidate pairs by a sweep along x: boxes sorted by their lower x, each compared with those that start before
+  // it ends (the union-find's result does not depend on the order of the unions).
+  std::vector<std::size_t> order(leaves.size());
+  std::iota(order.begin(), order.end(), std::size_t{0});
+  std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    return box[a].min.x() != box[b].min.x() ? box[a].min.x() < box[b].min.x() : a < b;
+  });
+  for (std::size_t oi = 0; oi < order.size(); ++oi) {
+    const std::size_t i = order[oi];
+    for (std::size_t oj = oi + 1; oj < order.size() && box[order[oj]].min.x() <= box[i].max.x(); ++oj) {
+      const std::size_t j = order[oj];
       if (!boxes_overlap(box[i], box[j])) continue;  // no common face
       const auto face = sim::common_face(model.tree().leaf(leaves[i]), model.tree().leaf(leaves[j]), root);
       if (face && model.material().face_connected(face->first, face->second)) uf.unite(int(i), int(j));
@@ -154,38 +163,58 @@ std::vector<int> triangle_components(const sim::TriMesh& mesh, int& count) {
   return comp;
 }
 
-// SPEC §4 stage 2: B'_i cuts only the material of component i. Returns one flag per leaf of `model` (empty when
-// no leaf is flagged): the leaves whose rest boxes meet the rest-space blade, grouped by material connectivity
-// (face-connected leaves whose common face material crosses) within a neighbourhood of the blade, and flagged when
-// their group holds none of the component's leaves. Such material lies under B'_i in rest space only: in the
-// deformed state the blade never touched it (a part folded or pushed away from where the component's transform puts
-// the blade). The neighbourhood is the blade's box grown by two of the largest leaf edges under it, so that a leaf
-// at the blade's fringe whose material reaches the component just outside the box (around the rim of a thin part,
-// say) counts as the component's own. When B'_i meets no leaf of its own component, nothing is flagged and the cut
-// is not restricted.
-std::vector<char> foreign_leaves(const sim::ObjectModel& model, const BladeVolume& blade,
-                                 const std::vector<int>& component) {
-  std::vector<int> reach;  // leaves under the blade (rest space), ascending
-  double h = 0.0;          // largest edge among them, m
-  for (int e = 0; e < model.num_elements(); ++e) {
-    const sim::Box3 b = model.root().cell_box(model.tree().leaf(e));
-    if (boxes_overlap(b, blade.bounds()) && blade.overlaps_box(b)) {
-      reach.push_back(e);
-      h = std::max(h, model.edge()[std::size_t(e)]);
+// Groups `leaves` (leaf indices of `model`) as the simulation connects them: two leaves are united when their rows
+// of P share a DOF (directly, or through a hard-bound slot), as in sim::element_components. Index i of the result
+// is leaves[i]. Linear in the leaves' entries of P.
+UnionFind dof_groups(const sim::ObjectModel& model, const std::vector<int>& leaves) {
+  const sim::DofMap& dm = model.dofs();
+  UnionFind uf(leaves.size());
+  std::vector<int> owner(std::size_t(dm.num_dofs), -1);  // the first of `leaves` (its index) that uses each DOF
+  for (std::size_t i = 0; i < leaves.size(); ++i) {
+    for (int s = 8 * leaves[i]; s < 8 * leaves[i] + 8; ++s) {
+      for (int k = dm.slot_begin[std::size_t(s)]; k < dm.slot_begin[std::size_t(s) + 1]; ++k) {
+        int& o = owner[std::size_t(dm.slot_dof[std::size_t(k)])];
+        if (o < 0) o = int(i);
+        else uf.unite(o, int(i));
+      }
     }
   }
+  return uf;
+}
+
+// SPEC §4 stage 2: B'_i cuts only the material of component i. Returns one flag per leaf of `model` (empty when
+// no leaf is flagged): the leaves of other components whose rest boxes meet the rest-space blade, flagged when,
+// within a neighbourhood of the blade, their material does not connect to the component's (leaves connect when
+// their rows of P share a DOF: node splitting gives the material on either side of a cut its own DOFs). Such
+// material lies under B'_i in rest space only: in the deformed state the blade never touched it (a part folded or
+// pushed away from where the component's transform puts the blade). The neighbourhood is the blade's box grown by
+// two of the largest leaf edges in play, so that a leaf at the blade's fringe whose material reaches the component
+// just outside the box (around the rim of a thin part, say) counts as the component's own. When no leaf of the
+// component lies in the neighbourhood, nothing is flagged and the cut is not restricted.
+std::vector<char> foreign_leaves(const sim::ObjectModel& model, const BladeVolume& blade,
+                                 const std::vector<int>& component) {
   const auto own = [&](int e) { return std::binary_search(component.begin(), component.end(), e); };
-  if (std::all_of(reach.begin(), reach.end(), own)) return {};
-  // The neighbourhood: the leaves under the blade first, then the others whose boxes meet the grown box.
+  // Only leaves of other components can be foreign: the component's own leaves need no exact blade test.
+  std::vector<int> candidates;  // leaves under the blade (rest space) that are not the component's, ascending
+  for (int e = 0; e < model.num_elements(); ++e) {
+    if (own(e)) continue;
+    const sim::Box3 b = model.root().cell_box(model.tree().leaf(e));
+    if (boxes_overlap(b, blade.bounds()) && blade.overlaps_box(b)) candidates.push_back(e);
+  }
+  if (candidates.empty() || component.empty()) return {};
+  double h = 0.0;  // largest edge among the candidates and the component's leaves, m
+  for (const int e : candidates) h = std::max(h, model.edge()[std::size_t(e)]);
+  for (const int e : component) h = std::max(h, model.edge()[std::size_t(e)]);
+  // The neighbourhood: the candidates first, then every other leaf whose box meets the grown box.
   const sim::Box3 near{blade.bounds().min.array() - 2.0 * h, blade.bounds().max.array() + 2.0 * h};
-  std::vector<int> context = reach;
+  std::vector<int> context = candidates;
   for (int e = 0; e < model.num_elements(); ++e) {
     if (boxes_overlap(model.root().cell_box(model.tree().leaf(e)), near) &&
-        !std::binary_search(reach.begin(), reach.end(), e)) {
+        !std::binary_search(candidates.begin(), candidates.end(), e)) {
       context.push_back(e);
     }
   }
-  UnionFind uf = material_groups(model, context);
+  UnionFind uf = dof_groups(model, context);
   std::vector<char> legit(context.size(), 0);  // per root
   bool any_own = false;
   for (std::size_t i = 0; i < context.size(); ++i) {
@@ -196,9 +225,9 @@ std::vector<char> foreign_leaves(const sim::ObjectModel& model, const BladeVolum
   if (!any_own) return {};
   std::vector<char> foreign(std::size_t(model.num_elements()), 0);
   bool any = false;
-  for (std::size_t i = 0; i < reach.size(); ++i) {
+  for (std::size_t i = 0; i < candidates.size(); ++i) {
     if (legit[std::size_t(uf.find(int(i)))]) continue;
-    foreign[std::size_t(reach[i])] = 1;
+    foreign[std::size_t(candidates[i])] = 1;
     any = true;
   }
   if (!any) return {};

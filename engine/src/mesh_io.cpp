@@ -14,10 +14,10 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
-#include <string>
 #include <numeric>
 #include <optional>
 #include <stdexcept>
+#include <string>
 #include <system_error>
 #include <utility>
 

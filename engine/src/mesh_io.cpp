@@ -54,11 +54,18 @@ class ImportErrors : public Assimp::LogStream {
   std::string first_;
 };
 
-/// Attaches an ImportErrors stream to assimp's (process-wide) logger for the lifetime of the object; imports are
-/// serialised, since the logger is shared.
+/// Serialises every use of assimp in this file: an import replaces assimp's process-wide logger for its duration
+/// (CaptureImportErrors), and an export on another thread must not log into one being destroyed.
+std::mutex& assimp_mutex() {
+  static std::mutex m;
+  return m;
+}
+
+/// Attaches an ImportErrors stream to assimp's (process-wide) logger for the lifetime of the object, holding
+/// assimp_mutex.
 class CaptureImportErrors {
  public:
-  CaptureImportErrors() : lock_(mutex()) {
+  CaptureImportErrors() : lock_(assimp_mutex()) {
     Assimp::DefaultLogger::create("", Assimp::Logger::NORMAL, 0);  // no default streams (no file, no console)
     Assimp::DefaultLogger::get()->attachStream(&errors_, Assimp::Logger::Err);
   }
@@ -71,10 +78,6 @@ class CaptureImportErrors {
   [[nodiscard]] const std::string& first() const { return errors_.first(); }
 
  private:
-  static std::mutex& mutex() {
-    static std::mutex m;
-    return m;
-  }
   std::lock_guard<std::mutex> lock_;
   ImportErrors errors_;
 };
@@ -306,6 +309,7 @@ std::string blob_bytes(const aiExportDataBlob& blob) {
 /// so that one file holds the whole mesh and one atomic write suffices.
 std::string export_with_assimp(const fs::path& path, const sim::TriMesh& mesh, const char* format_id) {
   const std::unique_ptr<aiScene> scene = to_assimp_scene(mesh);
+  const std::lock_guard<std::mutex> lock(assimp_mutex());
   Assimp::Exporter exporter;
   const aiExportDataBlob* blob = exporter.ExportToBlob(scene.get(), format_id);
   if (blob == nullptr) {

@@ -163,25 +163,6 @@ std::vector<int> triangle_components(const sim::TriMesh& mesh, int& count) {
   return comp;
 }
 
-// Groups `leaves` (leaf indices of `model`) as the simulation connects them: two leaves are united when their rows
-// of P share a DOF (directly, or through a hard-bound slot), as in sim::element_components. Index i of the result
-// is leaves[i]. Linear in the leaves' entries of P.
-UnionFind dof_groups(const sim::ObjectModel& model, const std::vector<int>& leaves) {
-  const sim::DofMap& dm = model.dofs();
-  UnionFind uf(leaves.size());
-  std::vector<int> owner(std::size_t(dm.num_dofs), -1);  // the first of `leaves` (its index) that uses each DOF
-  for (std::size_t i = 0; i < leaves.size(); ++i) {
-    for (int s = 8 * leaves[i]; s < 8 * leaves[i] + 8; ++s) {
-      for (int k = dm.slot_begin[std::size_t(s)]; k < dm.slot_begin[std::size_t(s) + 1]; ++k) {
-        int& o = owner[std::size_t(dm.slot_dof[std::size_t(k)])];
-        if (o < 0) o = int(i);
-        else uf.unite(o, int(i));
-      }
-    }
-  }
-  return uf;
-}
-
 // SPEC §4 stage 2: B'_i cuts only the material of component i. Returns one flag per leaf of `model` (empty when
 // no leaf is flagged): the leaves of other components whose rest boxes meet the rest-space blade, flagged when,
 // within a neighbourhood of the blade, their material does not connect to the component's (leaves connect when
@@ -214,7 +195,7 @@ std::vector<char> foreign_leaves(const sim::ObjectModel& model, const BladeVolum
       context.push_back(e);
     }
   }
-  UnionFind uf = dof_groups(model, context);
+  UnionFind uf = sim::element_groups(model, context);
   std::vector<char> legit(context.size(), 0);  // per root
   bool any_own = false;
   for (std::size_t i = 0; i < context.size(); ++i) {

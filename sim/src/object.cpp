@@ -4,6 +4,7 @@
 #include <cassert>
 #include <cmath>
 #include <numbers>
+#include <numeric>
 #include <stdexcept>
 
 namespace octocut::sim {
@@ -376,34 +377,32 @@ SimState SimState::rest(const ObjectModel& model) {
   return s;
 }
 
-std::vector<int> element_components(const ObjectModel& model, int& count) {
+DisjointSets element_groups(const ObjectModel& model, const std::vector<int>& elements) {
   const DofMap& dm = model.dofs();
-  const int ne = model.num_elements();
-  // Union-find over elements; each DOF remembers the first element that references it.
-  std::vector<int> parent(static_cast<std::size_t>(ne));
-  for (int e = 0; e < ne; ++e) parent[std::size_t(e)] = e;
-  auto find = [&parent](int a) {
-    while (parent[std::size_t(a)] != a) a = parent[std::size_t(a)] = parent[std::size_t(parent[std::size_t(a)])];
-    return a;
-  };
-  std::vector<int> owner(std::size_t(dm.num_dofs), -1);
-  for (int s = 0; s < dm.num_slots(); ++s) {
-    const int e = s / 8;
-    for (int i = dm.slot_begin[std::size_t(s)]; i < dm.slot_begin[std::size_t(s) + 1]; ++i) {
-      int& o = owner[std::size_t(dm.slot_dof[std::size_t(i)])];
-      if (o < 0) {
-        o = e;
-        continue;
+  DisjointSets sets(elements.size());
+  std::vector<int> owner(std::size_t(dm.num_dofs), -1);  // the first of `elements` (its index) that uses each DOF
+  for (std::size_t i = 0; i < elements.size(); ++i) {
+    for (int s = 8 * elements[i]; s < 8 * elements[i] + 8; ++s) {
+      for (int k = dm.slot_begin[std::size_t(s)]; k < dm.slot_begin[std::size_t(s) + 1]; ++k) {
+        int& o = owner[std::size_t(dm.slot_dof[std::size_t(k)])];
+        if (o < 0) o = int(i);
+        else sets.unite(o, int(i));
       }
-      const int a = find(e), b = find(o);
-      if (a != b) parent[std::size_t(std::max(a, b))] = std::min(a, b);
     }
   }
-  // Number the components by their smallest element.
+  return sets;
+}
+
+std::vector<int> element_components(const ObjectModel& model, int& count) {
+  const int ne = model.num_elements();
+  std::vector<int> all(static_cast<std::size_t>(ne));
+  std::iota(all.begin(), all.end(), 0);
+  DisjointSets sets = element_groups(model, all);
+  // Number the components by their smallest element (the root of each set).
   std::vector<int> comp(std::size_t(ne), -1), label(std::size_t(ne), -1);
   count = 0;
   for (int e = 0; e < ne; ++e) {
-    int& l = label[std::size_t(find(e))];
+    int& l = label[std::size_t(sets.find(e))];
     if (l < 0) l = count++;
     comp[std::size_t(e)] = l;
   }

@@ -9,6 +9,7 @@
 #include <optional>
 #include <vector>
 
+#include "octocut/sim/disjoint_sets.hpp"
 #include "octocut/sim/dof_map.hpp"
 #include "octocut/sim/hex_element.hpp"
 #include "octocut/sim/material.hpp"
@@ -185,6 +186,10 @@ class ObjectModel {
 /// or through a hard-bound slot). Returns comp (num_elements), comp[e] in [0, count), with components numbered in
 /// the order of their smallest element index.
 std::vector<int> element_components(const ObjectModel& model, int& count);
+
+/// The same connectivity among the given elements only: element i of the result stands for elements[i], and two are
+/// united when their rows of P share a DOF. The root of each set is its smallest index. Linear in their entries of P.
+DisjointSets element_groups(const ObjectModel& model, const std::vector<int>& elements);
 
 /// What one connected component of the elements holds.
 struct ComponentInfo {

@@ -3,11 +3,13 @@
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <iostream>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "assets.hpp"
 #include "octocut/engine/bench.hpp"
+#include "octocut/engine/bench_baseline.hpp"
 #include "octocut/engine/cut_command.hpp"
 #include "octocut/engine/expected.hpp"
 #include "octocut/engine/io.hpp"
@@ -113,10 +115,47 @@ int cmd_assets(const std::string& dir) {
   return 0;
 }
 
-int cmd_bench(const std::vector<std::string>& names, const std::string& json_path, bool quiet) {
-  const std::string doc = engine::run_benchmarks(names, quiet);
+struct BaselineOptions {
+  std::string compare_path;  // --baseline
+  std::string write_path;    // --write-baseline
+  double tolerance = 0.3;    // relative
+  double slack_ms = 0.25;    // ms on the baseline machine
+};
+
+// Runs the benchmarks; with a baseline, compares the cut timings with it (exit 1 on a regression, the JSON still
+// written); with --write-baseline, stores this run's cut timings as a new baseline.
+int cmd_bench(std::vector<std::string> names, const std::string& json_path, bool quiet, const BaselineOptions& b) {
+  std::optional<engine::CutBaseline> baseline;
+  if (!b.compare_path.empty()) {
+    std::string text;
+    try {
+      text = engine::read_file(b.compare_path);
+    } catch (const std::runtime_error& e) {
+      throw std::invalid_argument(e.what());  // a missing or unreadable baseline is bad input (exit 2)
+    }
+    baseline = engine::parse_cut_baseline(text, b.compare_path);
+    if (names.empty())
+      for (const auto& bm : baseline->benchmarks) names.push_back(bm.name);
+  }
+  if (!b.write_path.empty()) {
+    // Checked before the benchmarks run, not after.
+    if (!(b.tolerance >= 0.0 && b.tolerance <= 10.0)) throw std::invalid_argument("--tolerance must lie in [0, 10]");
+    if (!(b.slack_ms >= 0.0 && b.slack_ms <= 1000.0)) throw std::invalid_argument("--slack-ms must lie in [0, 1000]");
+    if (names.empty()) names.push_back("cut");
+  }
+  std::string doc = engine::run_benchmarks(names, quiet);
+  int code = 0;
+  if (baseline) {
+    const engine::BaselineComparison c = engine::compare_cut_baseline(doc, *baseline);
+    doc = engine::with_baseline_comparison(doc, c, b.compare_path);
+    if (!quiet) std::printf("%s", engine::baseline_comparison_table(c).c_str());
+    for (const std::string& p : c.problems) std::fprintf(stderr, "octocut: regression: %s\n", p.c_str());
+    if (!c.ok()) code = 1;
+  }
   if (!json_path.empty()) engine::write_file_atomic(json_path, doc);
-  return 0;
+  if (!b.write_path.empty())
+    engine::write_file_atomic(b.write_path, engine::make_cut_baseline(doc, b.tolerance, b.slack_ms));
+  return code;
 }
 
 }  // namespace
@@ -155,6 +194,18 @@ int main(int argc, char** argv) {
   bench->add_flag("--quiet", quiet, "No table on stdout");
   bool list = false;
   bench->add_flag("--list", list, "List the benchmark names and exit");
+  BaselineOptions baseline_opts;
+  bench->add_option("--baseline", baseline_opts.compare_path,
+                    "Compare the cut timings with this octocut.cut_baseline/1 file, normalised by the calibration "
+                    "kernel; exit 1 on a regression (default names: the baseline's benchmarks)");
+  bench->add_option("--write-baseline", baseline_opts.write_path,
+                    "Store this run's cut timings and calibration as a baseline (default names: every cut/ benchmark)");
+  bench->add_option("--tolerance", baseline_opts.tolerance,
+                    "With --write-baseline: allowed relative slowdown of a stage")
+      ->capture_default_str();
+  bench->add_option("--slack-ms", baseline_opts.slack_ms,
+                    "With --write-baseline: allowed absolute slowdown of a stage, ms on this machine")
+      ->capture_default_str();
 
   auto* cut = app.add_subcommand("cut", "One rest-space cut of a surface by a blade (stages 2-3, fresh M)");
   engine::CutCommandOptions cut_opts;
@@ -190,7 +241,7 @@ int main(int argc, char** argv) {
       for (const std::string& n : engine::benchmark_names()) std::printf("%s\n", n.c_str());
       return 0;
     }
-    if (*bench) return cmd_bench(names, json_path, quiet);
+    if (*bench) return cmd_bench(names, json_path, quiet, baseline_opts);
     if (*assets) return cmd_assets(assets_dir);
     if (*cut) {
       cut_opts.verify = !no_verify;

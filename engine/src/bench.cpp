@@ -1,6 +1,9 @@
 #include "octocut/engine/bench.hpp"
 
 #include <algorithm>
+#include <array>
+#include <cstdint>
+#include <vector>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -12,6 +15,7 @@
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
+#include <system_error>
 #include <thread>
 
 #include "octocut/engine/material_graph_cache.hpp"
@@ -406,6 +410,86 @@ std::string cpu_name() {
 
 }  // namespace
 
+CalibrationSample calibration_kernel() {
+  // The table for the gathers stays allocated between runs: the kernel measures memory access, not page faults.
+  static const std::vector<uint32_t> table = [] {
+    std::vector<uint32_t> t(std::size_t(1) << 22);  // 16 MiB
+    uint64_t s = 0x2545f4914f6cdd1dull;
+    for (uint32_t& x : t) {
+      s ^= s << 13;
+      s ^= s >> 7;
+      s ^= s << 17;
+      x = static_cast<uint32_t>(s >> 32);
+    }
+    return t;
+  }();
+  const auto t0 = Clock::now();
+  uint64_t state = 0x853c49e6748fea9bull;
+  const auto next = [&state] {  // xorshift64
+    state ^= state << 13;
+    state ^= state >> 7;
+    state ^= state << 17;
+    return state;
+  };
+  const auto unit = [&next] { return static_cast<double>(next() >> 11) * 0x1.0p-53; };
+  uint64_t checksum = 0;
+  // 1. Orientation tests of random point quadruples (floating point, unpredictable branches): 2^18 of them.
+  std::vector<std::array<double, 3>> points(4096);  // m, in the unit cube
+  for (auto& p : points) p = {unit(), unit(), unit()};
+  uint64_t positive = 0;
+  for (int i = 0; i < (1 << 18); ++i) {
+    const uint64_t r = next();
+    const auto& a = points[r & 4095];
+    const auto& b = points[(r >> 12) & 4095];
+    const auto& c = points[(r >> 24) & 4095];
+    const auto& d = points[(r >> 36) & 4095];
+    const double bx = b[0] - a[0], by = b[1] - a[1], bz = b[2] - a[2];
+    const double cx = c[0] - a[0], cy = c[1] - a[1], cz = c[2] - a[2];
+    const double dx = d[0] - a[0], dy = d[1] - a[1], dz = d[2] - a[2];
+    const double det = bx * (cy * dz - cz * dy) - by * (cx * dz - cz * dx) + bz * (cx * dy - cy * dx);
+    if (det > 0.0) {
+      ++positive;
+    } else if (det < 0.0) {
+      checksum += static_cast<uint64_t>(i);
+    }
+  }
+  checksum ^= positive << 32;
+  // 2. Sorting 2^16 random keys (integer compares, branches; cache-resident).
+  std::vector<uint64_t> keys(std::size_t(1) << 16);
+  for (uint64_t& k : keys) k = next();
+  std::sort(keys.begin(), keys.end());
+  checksum += keys[12345] ^ keys[54321];
+  // 3. 2^18 gathers from the 16 MiB table (beyond the core's caches: latency and bandwidth).
+  uint64_t gathered = 0;
+  for (int i = 0; i < (1 << 18); ++i) gathered += table[next() & (table.size() - 1)];
+  checksum += gathered;
+  return {std::chrono::duration<double, std::milli>(Clock::now() - t0).count(), checksum};
+}
+
+// One calibration sample: the kernel on two threads at once, as a cut runs on two (its surface track and its model
+// thread); wall time, ms. A machine whose second core is busy elsewhere shows it here too.
+double calibration_sample() {
+  const auto t0 = Clock::now();
+  std::thread other;
+  try {
+    other = std::thread([] { calibration_kernel(); });
+  } catch (const std::system_error&) {
+    // No second thread to be had: the cut runs its stages on one thread then, and so does the kernel.
+    calibration_kernel();
+  }
+  calibration_kernel();
+  if (other.joinable()) other.join();
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+double calibration_ms(int runs) {
+  if (runs < 1) throw std::invalid_argument("calibration needs at least one run");
+  calibration_sample();  // warm-up: the table, the code, the clock
+  std::vector<double> ms;
+  for (int i = 0; i < runs; ++i) ms.push_back(calibration_sample());
+  return median_of(ms);
+}
+
 std::vector<std::string> benchmark_names() {
   std::vector<std::string> out;
   for (const Entry& e : registry()) out.push_back(e.name);
@@ -425,6 +509,14 @@ std::string run_benchmarks(const std::vector<std::string>& filters, bool quiet) 
                      [&](const Entry& e) { return e.name == f || e.name.rfind(f + "/", 0) == 0; }))
       throw std::invalid_argument("no benchmark matches '" + f + "'");
   }
+  // The calibration kernel runs before and after the benchmarks; its time is the median of both sets of runs, so
+  // that a machine whose speed drifts during the run is measured at its average.
+  std::vector<double> calibration;
+  const auto calibrate = [&calibration] {
+    calibration_sample();
+    for (int i = 0; i < 9; ++i) calibration.push_back(calibration_sample());
+  };
+  calibrate();
   json doc;
   doc["schema"] = "octocut.bench/1";
   doc["machine"] = {{"cpu", cpu_name()}, {"threads", int(std::thread::hardware_concurrency())}};
@@ -442,6 +534,9 @@ std::string run_benchmarks(const std::vector<std::string>& filters, bool quiet) 
                               b.metrics.dump().c_str());
     }
   }
+  calibrate();
+  doc["machine"]["calibration_ms"] = median_of(calibration);
+  if (!quiet) std::printf("calibration kernel: %.3f ms (median of %zu runs)\n", median_of(calibration), calibration.size());
   return doc.dump(2) + "\n";
 }
 

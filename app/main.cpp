@@ -1,6 +1,7 @@
 // octocut: command-line parsing and subcommands only (SPEC §7). Exit codes: 0 success, 1 the run failed (report
 // still written), 2 bad input or usage.
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <cstdio>
 #include <iostream>
 #include <optional>
@@ -134,8 +135,16 @@ int cmd_bench(std::vector<std::string> names, const std::string& json_path, bool
       throw std::invalid_argument(e.what());  // a missing or unreadable baseline is bad input (exit 2)
     }
     baseline = engine::parse_cut_baseline(text, b.compare_path);
-    if (names.empty())
-      for (const auto& bm : baseline->benchmarks) names.push_back(bm.name);
+    const std::vector<std::string> known = engine::benchmark_names();
+    const bool run_the_baselines = names.empty();
+    for (std::size_t i = 0; i < baseline->benchmarks.size(); ++i) {
+      const std::string& name = baseline->benchmarks[i].name;
+      if (std::find(known.begin(), known.end(), name) == known.end()) {
+        throw std::invalid_argument(b.compare_path + ": /benchmarks/" + std::to_string(i) +
+                                    "/name: this build has no benchmark '" + name + "'");
+      }
+      if (run_the_baselines) names.push_back(name);
+    }
   }
   if (!b.write_path.empty()) {
     // Checked before the benchmarks run, not after.
@@ -198,14 +207,17 @@ int main(int argc, char** argv) {
   bench->add_option("--baseline", baseline_opts.compare_path,
                     "Compare the cut timings with this octocut.cut_baseline/1 file, normalised by the calibration "
                     "kernel; exit 1 on a regression (default names: the baseline's benchmarks)");
-  bench->add_option("--write-baseline", baseline_opts.write_path,
-                    "Store this run's cut timings and calibration as a baseline (default names: every cut/ benchmark)");
+  auto* write_baseline = bench->add_option(
+      "--write-baseline", baseline_opts.write_path,
+      "Store this run's cut timings and calibration as a baseline (default names: every cut/ benchmark)");
   bench->add_option("--tolerance", baseline_opts.tolerance,
                     "With --write-baseline: allowed relative slowdown of a stage")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->needs(write_baseline);
   bench->add_option("--slack-ms", baseline_opts.slack_ms,
                     "With --write-baseline: allowed absolute slowdown of a stage, ms on this machine")
-      ->capture_default_str();
+      ->capture_default_str()
+      ->needs(write_baseline);
 
   auto* cut = app.add_subcommand("cut", "One rest-space cut of a surface by a blade (stages 2-3, fresh M)");
   engine::CutCommandOptions cut_opts;

@@ -99,6 +99,18 @@ TEST_F(BenchCli, BadBaselinesExitTwoNamingTheFileAndPointerBeforeAnythingRuns) {
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("missing.json"), std::string::npos) << r.output;
 
+  bad["benchmarks"][0]["ms"]["surface"] = 1.0;
+  bad["benchmarks"][0]["name"] = "cut/no_such_scene";
+  write("unknown.json", bad);
+  r = run_octocut("bench --quiet --baseline " + p("unknown.json"));
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("unknown.json: /benchmarks/0/name: this build has no benchmark 'cut/no_such_scene'"),
+            std::string::npos)
+      << r.output;
+
+  // The allowances belong to a baseline being written.
+  EXPECT_EQ(run_octocut("bench cut/adaptive_cut --quiet --tolerance 0.5").exit_code, 2);
+
   r = run_octocut("bench cut/adaptive_cut --quiet --write-baseline " + p("b.json") + " --tolerance -1");
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("--tolerance"), std::string::npos) << r.output;

@@ -147,9 +147,7 @@ int cmd_bench(std::vector<std::string> names, const std::string& json_path, bool
     }
   }
   if (!b.write_path.empty()) {
-    // Checked before the benchmarks run, not after.
-    if (!(b.tolerance >= 0.0 && b.tolerance <= 10.0)) throw std::invalid_argument("--tolerance must lie in [0, 10]");
-    if (!(b.slack_ms >= 0.0 && b.slack_ms <= 1000.0)) throw std::invalid_argument("--slack-ms must lie in [0, 1000]");
+    engine::check_baseline_allowances(b.tolerance, b.slack_ms);  // before the benchmarks run, not after
     if (names.empty()) names.push_back("cut");
   }
   std::string doc = engine::run_benchmarks(names, quiet);

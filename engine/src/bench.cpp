@@ -2,9 +2,8 @@
 
 #include <algorithm>
 #include <array>
-#include <cstdint>
-#include <vector>
 #include <chrono>
+#include <cstdint>
 #include <cstdlib>
 #include <filesystem>
 #include <cstdio>
@@ -17,6 +16,7 @@
 #include <stdexcept>
 #include <system_error>
 #include <thread>
+#include <vector>
 
 #include "octocut/engine/material_graph_cache.hpp"
 #include "octocut/engine/mesh_io.hpp"
@@ -410,27 +410,29 @@ std::string cpu_name() {
 
 }  // namespace
 
+namespace {
+
+// xorshift64: the calibration kernel's pseudo-random numbers (the same on every machine).
+uint64_t xorshift64(uint64_t& state) {
+  state ^= state << 13;
+  state ^= state >> 7;
+  state ^= state << 17;
+  return state;
+}
+
+}  // namespace
+
 CalibrationSample calibration_kernel() {
   // The table for the gathers stays allocated between runs: the kernel measures memory access, not page faults.
   static const std::vector<uint32_t> table = [] {
     std::vector<uint32_t> t(std::size_t(1) << 22);  // 16 MiB
     uint64_t s = 0x2545f4914f6cdd1dull;
-    for (uint32_t& x : t) {
-      s ^= s << 13;
-      s ^= s >> 7;
-      s ^= s << 17;
-      x = static_cast<uint32_t>(s >> 32);
-    }
+    for (uint32_t& x : t) x = static_cast<uint32_t>(xorshift64(s) >> 32);
     return t;
   }();
   const auto t0 = Clock::now();
   uint64_t state = 0x853c49e6748fea9bull;
-  const auto next = [&state] {  // xorshift64
-    state ^= state << 13;
-    state ^= state >> 7;
-    state ^= state << 17;
-    return state;
-  };
+  const auto next = [&state] { return xorshift64(state); };
   const auto unit = [&next] { return static_cast<double>(next() >> 11) * 0x1.0p-53; };
   uint64_t checksum = 0;
   // 1. Orientation tests of random point quadruples (floating point, unpredictable branches): 2^18 of them.
@@ -466,6 +468,8 @@ CalibrationSample calibration_kernel() {
   return {std::chrono::duration<double, std::milli>(Clock::now() - t0).count(), checksum};
 }
 
+namespace {
+
 // One calibration sample: the kernel on two threads at once, as a cut runs on two (its surface track and its model
 // thread); wall time, ms. A machine whose second core is busy elsewhere shows it here too.
 double calibration_sample() {
@@ -482,11 +486,18 @@ double calibration_sample() {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
+// `runs` calibration samples after one warm-up (the table, the code, the clock), appended to `ms`.
+void add_calibration_samples(int runs, std::vector<double>& ms) {
+  calibration_sample();
+  for (int i = 0; i < runs; ++i) ms.push_back(calibration_sample());
+}
+
+}  // namespace
+
 double calibration_ms(int runs) {
   if (runs < 1) throw std::invalid_argument("calibration needs at least one run");
-  calibration_sample();  // warm-up: the table, the code, the clock
   std::vector<double> ms;
-  for (int i = 0; i < runs; ++i) ms.push_back(calibration_sample());
+  add_calibration_samples(runs, ms);
   return median_of(ms);
 }
 
@@ -511,12 +522,8 @@ std::string run_benchmarks(const std::vector<std::string>& filters, bool quiet) 
   }
   // The calibration kernel runs before and after the benchmarks; its time is the median of both sets of runs, so
   // that a machine whose speed drifts during the run is measured at its average.
-  std::vector<double> calibration;
-  const auto calibrate = [&calibration] {
-    calibration_sample();
-    for (int i = 0; i < 9; ++i) calibration.push_back(calibration_sample());
-  };
-  calibrate();
+  std::vector<double> calibration;  // ms
+  add_calibration_samples(9, calibration);
   json doc;
   doc["schema"] = "octocut.bench/1";
   doc["machine"] = {{"cpu", cpu_name()}, {"threads", int(std::thread::hardware_concurrency())}};
@@ -534,7 +541,7 @@ std::string run_benchmarks(const std::vector<std::string>& filters, bool quiet) 
                               b.metrics.dump().c_str());
     }
   }
-  calibrate();
+  add_calibration_samples(9, calibration);
   doc["machine"]["calibration_ms"] = median_of(calibration);
   if (!quiet) std::printf("calibration kernel: %.3f ms (median of %zu runs)\n", median_of(calibration), calibration.size());
   return doc.dump(2) + "\n";

@@ -136,11 +136,13 @@ CutBaseline parse_cut_baseline(const std::string& text, const std::string& file)
   return b;
 }
 
+void check_baseline_allowances(double tolerance, double slack_ms) {
+  if (!(tolerance >= 0.0 && tolerance <= kMaxTolerance)) throw std::invalid_argument("--tolerance must lie in [0, 10]");
+  if (!(slack_ms >= 0.0 && slack_ms <= kMaxSlackMs)) throw std::invalid_argument("--slack-ms must lie in [0, 1000]");
+}
+
 std::string make_cut_baseline(const std::string& bench_json, double tolerance, double slack_ms) {
-  if (!std::isfinite(tolerance) || tolerance < 0.0 || tolerance > kMaxTolerance)
-    throw std::invalid_argument("--tolerance must lie in [0, 10]");
-  if (!std::isfinite(slack_ms) || slack_ms < 0.0 || slack_ms > kMaxSlackMs)
-    throw std::invalid_argument("--slack-ms must lie in [0, 1000]");
+  check_baseline_allowances(tolerance, slack_ms);
   const json bench = parse_bench(bench_json);
   const double calibration = calibration_of(bench);
   json doc;

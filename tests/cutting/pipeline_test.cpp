@@ -378,12 +378,13 @@ TEST(CutPipeline, BladeCutsOnlyTheMaterialOfItsOwnComponent) {
   Object o;
   two_slabs(o, test::merged(sim::closed_box_grid(lower, 32), sim::closed_box_grid(upper, 32)));
   const sim::TriMesh s0 = o.cut.surface;
-  const int upper_tets0 = [&] {
-    int n = 0;
+  const auto upper_tets = [&] {  // alive tets of the upper slab
+    int count = 0;
     for (int t = 0; t < o.cut.graph->num_tets_total(); ++t)
-      n += o.cut.graph->alive(t) && o.cut.graph->tet(t)[0].z() > 0.0045;
-    return n;
-  }();
+      count += o.cut.graph->alive(t) && o.cut.graph->tet(t)[0].z() > 0.0045;
+    return count;
+  };
+  const int upper_tets0 = upper_tets();
 
   const double r = kSlabPunchRadius;
   const int n = kSlabPunchSides;
@@ -421,10 +422,7 @@ TEST(CutPipeline, BladeCutsOnlyTheMaterialOfItsOwnComponent) {
       EXPECT_NE(std::find(top.vertices.begin(), top.vertices.end(), p), top.vertices.end());
     }
   }
-  int upper_tets = 0;
-  for (int t = 0; t < o.cut.graph->num_tets_total(); ++t)
-    upper_tets += o.cut.graph->alive(t) && o.cut.graph->tet(t)[0].z() > 0.0045;
-  EXPECT_EQ(upper_tets, upper_tets0);
+  EXPECT_EQ(upper_tets(), upper_tets0);
   EXPECT_GT(out.tets_removed, 0);
   // The upper slab's leaves were not refined: none of them is finer than the base level.
   const sim::ObjectModel& m = o.sim->model();

@@ -56,9 +56,13 @@ struct BaselineComparison {
 /// bad value (unknown keys, missing keys, non-finite or out-of-range numbers, duplicate names or stages).
 CutBaseline parse_cut_baseline(const std::string& text, const std::string& file);
 
+/// Throws std::invalid_argument unless tolerance lies in [0, 10] and slack_ms in [0, 1000] ms (the ranges a baseline
+/// file may hold).
+void check_baseline_allowances(double tolerance, double slack_ms);
+
 /// A baseline (JSON text) from an octocut.bench/1 document: its cut/ benchmarks and its calibration.
 /// Throws std::invalid_argument when the document has no cut benchmark or no calibration, or when tolerance or
-/// slack_ms is out of range (tolerance in [0, 10], slack_ms in [0, 1000] ms).
+/// slack_ms is out of range (check_baseline_allowances).
 std::string make_cut_baseline(const std::string& bench_json, double tolerance, double slack_ms);
 
 /// Compares the cut benchmarks of an octocut.bench/1 document with `baseline`. A compared stage without a measured

@@ -62,90 +62,6 @@ UnionFind material_groups(const sim::ObjectModel& model, const std::vector<int>&
   return uf;
 }
 
-// The surface as a sequence of edits. Every edit keeps the surviving vertices in order and appends the new ones, so
-// the current vertices are the original ones that survive (in order) and then new ones: the track needs only the
-// original indices that are gone and the number of original vertices left, not a map over all of S.
-struct SurfaceTrack {
-  sim::TriMesh mesh;         // S after the edits so far (empty before the first one)
-  std::vector<char> cut_face;  // (|F| of mesh)
-  std::vector<int> removed;  // original indices of the original vertices that are gone, ascending
-  std::size_t kept = 0;      // mesh.vertices[0, kept) are original vertices
-
-  explicit SurfaceTrack(std::size_t original_vertices) : kept(original_vertices) {}
-
-  // Removes current vertices (ascending current indices) from the bookkeeping.
-  void forget(const std::vector<int>& current) {
-    // The original index of current vertex c < kept is the c-th original index not in `removed`.
-    std::vector<int> gone;  // original indices, ascending
-    std::size_t r = 0;      // into removed
-    long original = 0;      // the original index of current vertex `at`
-    long at = 0;
-    for (const int c : current) {
-      if (std::size_t(c) >= kept) break;
-      // Advance from current vertex `at` to c, skipping the original indices already gone.
-      while (true) {
-        while (r < removed.size() && removed[r] == original) {
-          ++r;
-          ++original;
-        }
-        if (at == c) break;
-        ++at;
-        ++original;
-      }
-      gone.push_back(int(original));
-    }
-    const std::size_t gone_kept = gone.size();
-    std::vector<int> merged;
-    merged.reserve(removed.size() + gone.size());
-    std::merge(removed.begin(), removed.end(), gone.begin(), gone.end(), std::back_inserter(merged));
-    removed = std::move(merged);
-    kept -= gone_kept;
-  }
-
-  // Applies one boolean result to `current_flags` (the cut-face flags of the surface it was computed on).
-  void apply(SurfaceCutResult&& r, const std::vector<char>& current_flags) {
-    forget(r.removed_vertices);
-    // A blade triangle is a cut face; a piece of an old triangle is one when that was (flags missing count as 0).
-    std::vector<char> flags(r.mesh.triangles.size(), 1);
-    for (std::size_t f = 0; f < flags.size(); ++f) {
-      const int o = r.triangle_origin[f];
-      if (o >= 0) flags[f] = std::size_t(o) < current_flags.size() ? current_flags[std::size_t(o)] : 0;
-    }
-    cut_face = std::move(flags);
-    mesh = std::move(r.mesh);
-  }
-
-  // Removes the given triangles and the vertices nothing uses any more, keeping the order of the rest.
-  void remove_triangles(const std::vector<char>& drop) {
-    std::vector<std::array<int32_t, 3>> tris;
-    std::vector<char> flags;
-    std::vector<char> used(mesh.vertices.size(), 0);
-    for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
-      if (drop[f]) continue;
-      tris.push_back(mesh.triangles[f]);
-      flags.push_back(cut_face[f]);
-      for (int32_t v : mesh.triangles[f]) used[std::size_t(v)] = 1;
-    }
-    std::vector<int32_t> remap(mesh.vertices.size(), -1);
-    std::vector<sim::Vec3> verts;
-    std::vector<int> unused;  // current indices, ascending
-    for (std::size_t v = 0; v < mesh.vertices.size(); ++v) {
-      if (!used[v]) {
-        unused.push_back(int(v));
-        continue;
-      }
-      remap[v] = int32_t(verts.size());
-      verts.push_back(mesh.vertices[v]);
-    }
-    for (auto& t : tris)
-      for (int32_t& v : t) v = remap[std::size_t(v)];
-    forget(unused);
-    mesh.vertices = std::move(verts);
-    mesh.triangles = std::move(tris);
-    cut_face = std::move(flags);
-  }
-};
-
 // Connected components of a triangle mesh's triangles (through shared vertices): component of each triangle (|F|).
 std::vector<int> triangle_components(const sim::TriMesh& mesh, int& count) {
   UnionFind uf(mesh.vertices.size());
@@ -371,6 +287,24 @@ void run_model_stages(ModelWork& w, const std::vector<sim::TriMesh>& blades,
 
 }  // namespace
 
+void index_surface(CutObject& object) {
+  // Room for the cuts to append to S without moving it (apply_cut keeps room when it compacts S).
+  const auto room = [](std::size_t n) { return n + n / 8 + 1024; };
+  object.surface.vertices.reserve(room(object.surface.vertices.size()));
+  object.surface.triangles.reserve(room(object.surface.triangles.size()));
+  object.cut_faces.reserve(room(object.surface.triangles.size()));
+  auto grid = std::make_unique<FaceGrid>();
+  grid->build(object.surface);
+  object.grid.grid = std::move(grid);
+  object.grid.vertices = object.surface.vertices.size();
+  object.grid.triangles = object.surface.triangles.size();
+}
+
+bool surface_indexed(const CutObject& object) {
+  return object.grid.grid != nullptr && object.grid.vertices == object.surface.vertices.size() &&
+         object.grid.triangles == object.surface.triangles.size();
+}
+
 CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceEmbedding& embedding,
                      const CutRequest& request, const CutOptions& options) {
   CutOutcome out;
@@ -501,9 +435,25 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
 
     // ---- 2. surface ------------------------------------------------------------------------------------------------
     t0 = Clock::now();
-    // The first blade cuts object.surface itself; the track copies S only when no blade changed it (S stays as it
-    // is until the commit).
-    SurfaceTrack track(object.surface.vertices.size());
+    // S is edited in place (its grid finds the faces near each blade); the journal undoes every edit when a later
+    // stage fails. Vertices that no triangle uses any more stay in S until stage 5 compacts it.
+    if (!surface_indexed(object)) {  // O(|S|): only when the caller did not index S
+      try {
+        index_surface(object);
+      } catch (const std::invalid_argument& e) {
+        throw StageFailure(std::string("surface: ") + e.what());
+      }
+    }
+    SurfaceEditor editor(object.surface, *object.grid.grid, &object.cut_faces);
+    struct Rollback {  // on every way out without a commit
+      SurfaceEditor& editor;
+      bool armed = true;
+      ~Rollback() {
+        if (armed) editor.rollback(0);
+      }
+    } rollback{editor};
+    const std::size_t vertices_before = object.surface.vertices.size();  // S.vertices[0, vertices_before) are old
+    std::vector<int32_t> unused;  // vertices of S that no triangle uses any more, ascending
     bool surface_changed = false;
     SurfaceCutOptions sopt;
     sopt.verify = options.verify;
@@ -514,14 +464,14 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     std::vector<char> unrestricted(rest_blades.size(), 0);  // per blade: its restriction was dropped
     for (std::size_t k = 0; k < rest_blades.size(); ++k) {
       sim::TriMesh& b = rest_blades[k];
-      const sim::TriMesh& current = surface_changed ? track.mesh : object.surface;
-      if (current.triangles.empty()) break;
+      if (object.surface.triangles.empty()) break;
       sopt.removable = nullptr;
       if (!foreign[k].empty())
         sopt.removable = [&model, &f = foreign[k]](const sim::Vec3& p) { return !in_foreign(model, f, p); };
       // A degenerate configuration that the boolean refuses is retried with the blade moved by 1e-9, then 1e-7,
-      // of its size; the blade that was used is the one the model stages must use too.
-      auto [r, moves] = cut_surface_perturbing(current, b, sopt);
+      // of its size; the blade that was used is the one the model stages must use too. A failed attempt leaves S
+      // as it was.
+      auto [r, moves] = cut_surface_in_place_perturbing(editor, b, sopt);
       // The restriction decides per region of S and of the blade, by one point each, and leaves are coarser than
       // S: where a region straddles the border of the foreign material, the kept pieces need not close up and the
       // boolean refuses its result. B'_i then cuts without the restriction (as if nothing were foreign), and the
@@ -529,7 +479,7 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
       if (r.status == SurfaceCutStatus::failed && sopt.removable) {
         sopt.removable = nullptr;
         sim::TriMesh unrestricted_blade = b;
-        auto [again, again_moves] = cut_surface_perturbing(current, unrestricted_blade, sopt);
+        auto [again, again_moves] = cut_surface_in_place_perturbing(editor, unrestricted_blade, sopt);
         if (again.status != SurfaceCutStatus::failed) {
           b = std::move(unrestricted_blade);
           r = std::move(again);
@@ -543,15 +493,14 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
       if (r.status == SurfaceCutStatus::failed) throw StageFailure("surface: " + r.reason);
       if (r.status == SurfaceCutStatus::no_op) continue;
       out.removed_volume += r.removed_volume;
-      track.apply(std::move(r), surface_changed ? track.cut_face : object.cut_faces);
+      std::vector<int32_t> merged;
+      merged.reserve(unused.size() + r.removed_vertices.size());
+      std::merge(unused.begin(), unused.end(), r.removed_vertices.begin(), r.removed_vertices.end(),
+                 std::back_inserter(merged));
+      unused = std::move(merged);
       surface_changed = true;
     }
     out.ms.surface = ms_since(t0);
-    if (!surface_changed) {
-      track.mesh = object.surface;
-      track.cut_face = object.cut_faces;
-      track.cut_face.resize(track.mesh.triangles.size(), 0);
-    }
 
     model_known.wait();
     // A perturbed blade removes material where it now is, and one whose restriction was dropped removes all the
@@ -584,27 +533,34 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
       std::vector<char> gone_leaf(std::size_t(split.num_elements()), 0);
       for (int e : work.fragment_leaves) gone_leaf[std::size_t(e)] = 1;
       int ncomp = 0;
-      const std::vector<int> tcomp = triangle_components(track.mesh, ncomp);
+      const sim::TriMesh& current = object.surface;
+      const std::vector<int> tcomp = triangle_components(current, ncomp);
       std::vector<int> in_gone(std::size_t(ncomp), 0), total(std::size_t(ncomp), 0);
-      std::vector<char> seen(track.mesh.vertices.size(), 0);
-      for (std::size_t f = 0; f < track.mesh.triangles.size(); ++f) {
-        for (int32_t v : track.mesh.triangles[f]) {
+      std::vector<char> seen(current.vertices.size(), 0);
+      for (std::size_t f = 0; f < current.triangles.size(); ++f) {
+        for (int32_t v : current.triangles[f]) {
           if (seen[std::size_t(v)]) continue;
           seen[std::size_t(v)] = 1;
           ++total[std::size_t(tcomp[f])];
-          const auto pe = split.embed(track.mesh.vertices[std::size_t(v)]);
+          const auto pe = split.embed(current.vertices[std::size_t(v)]);
           if (pe && gone_leaf[std::size_t(pe->leaf)]) ++in_gone[std::size_t(tcomp[f])];
         }
       }
-      std::vector<char> drop(track.mesh.triangles.size(), 0);
-      bool any = false;
-      for (std::size_t f = 0; f < drop.size(); ++f) {
+      std::vector<int32_t> drop;  // triangles of the removed components, ascending
+      for (std::size_t f = 0; f < current.triangles.size(); ++f) {
         const int c = tcomp[f];
-        drop[f] = 2 * in_gone[std::size_t(c)] > total[std::size_t(c)];
-        any = any || drop[f];
+        if (2 * in_gone[std::size_t(c)] > total[std::size_t(c)]) drop.push_back(int32_t(f));
       }
-      if (any) {
-        track.remove_triangles(drop);
+      if (!drop.empty()) {
+        // Removed from the last down: the triangle that moves into a removed one's place is always one that stays.
+        for (auto it = drop.rbegin(); it != drop.rend(); ++it) editor.remove_face(*it);
+        // The vertices that no triangle uses any more join `unused`.
+        std::vector<char> used(current.vertices.size(), 0);
+        for (const auto& t : current.triangles)
+          for (int32_t v : t) used[std::size_t(v)] = 1;
+        unused.clear();
+        for (std::size_t v = 0; v < used.size(); ++v)
+          if (!used[v]) unused.push_back(int32_t(v));
         surface_changed = true;
       }
       out.ms.node_split += ms_since(t0);
@@ -614,17 +570,42 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     t0 = Clock::now();
     if (all_gone) {
       // Nothing is left to simulate: the object is gone. The simulator keeps its last model but is no longer run.
+      editor.commit();
+      rollback.armed = false;
       object.surface = sim::TriMesh{};
+      object.grid = SurfaceGrid{};
       object.cut_faces.clear();
       object.graph = work.graph;
       object.removed = true;
       out.ms.embedding = ms_since(t0);
       return finish("ok", "");
     }
+    // S compacted: the vertices no triangle uses go, the others keep their order (the embedding's edit: old ones
+    // removed, new ones appended). The edit gets its own triangles; S itself is compacted in place at the commit.
     sim::SurfaceEdit edit;
-    edit.removed_vertices = track.removed;
-    edit.inserted_rest.assign(track.mesh.vertices.begin() + std::ptrdiff_t(track.kept), track.mesh.vertices.end());
-    edit.triangles = track.mesh.triangles;
+    const auto n = int32_t(object.surface.vertices.size());
+    std::vector<int32_t> old_to_new(static_cast<std::size_t>(n));  // (|V|): the new index of each vertex, -1 for an unused one
+    {
+      const sim::TriMesh& current = object.surface;
+      int32_t from = 0, shift = 0;
+      for (const int32_t v : unused) {
+        std::iota(old_to_new.begin() + from, old_to_new.begin() + v, from - shift);
+        old_to_new[std::size_t(v)] = -1;
+        if (std::size_t(v) < vertices_before) edit.removed_vertices.push_back(int(v));
+        from = v + 1;
+        ++shift;
+      }
+      std::iota(old_to_new.begin() + from, old_to_new.end(), from - shift);
+      for (std::size_t v = vertices_before; v < current.vertices.size(); ++v)
+        if (old_to_new[v] >= 0) edit.inserted_rest.push_back(current.vertices[v]);
+      edit.triangles = current.triangles;
+      if (!unused.empty()) {
+        const int32_t first_unused = unused.front();  // below it, indices stay
+        for (auto& t : edit.triangles)
+          for (int32_t& v : t)
+            if (v > first_unused) v = old_to_new[std::size_t(v)];
+      }
+    }
     embedding.update(*work.next, std::move(edit));  // strong guarantee: unchanged when it throws
     out.ms.embedding = ms_since(t0);
 
@@ -644,9 +625,22 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
       out.ms.solver_update = ms_since(t0);
     }
 
-    // Commit the object.
-    object.surface = std::move(track.mesh);
-    object.cut_faces = std::move(track.cut_face);
+    // Commit the object. The grid's triangles keep their indices and their vertices their positions.
+    editor.commit();
+    rollback.armed = false;
+    if (!unused.empty()) {
+      // In place: the used vertices move down over the unused ones (no allocation; room stays for the next cut).
+      std::vector<sim::Vec3>& vs = object.surface.vertices;
+      for (int32_t v = unused.front() + 1; v < n; ++v)
+        if (old_to_new[std::size_t(v)] >= 0) vs[std::size_t(old_to_new[std::size_t(v)])] = vs[std::size_t(v)];
+      vs.resize(vs.size() - unused.size());
+      const int32_t first_unused = unused.front();
+      for (auto& t : object.surface.triangles)
+        for (int32_t& v : t)
+          if (v > first_unused) v = old_to_new[std::size_t(v)];
+    }
+    object.grid.vertices = object.surface.vertices.size();
+    object.grid.triangles = object.surface.triangles.size();
     object.graph = std::move(work.graph);
     object.surface_checked = object.surface_checked && options.verify;
     return finish("ok", "");

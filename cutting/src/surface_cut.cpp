@@ -1,14 +1,13 @@
 // The local surface boolean S \ B' (SPEC §4 stage 2). The only translation unit of the surface cut that sees CGAL.
 //
 // Algorithm:
-//  1. The faces of S whose bounding box meets the grown bounding box G of the blade are found with vertex outcodes
-//     against G grown by the faces' size (one pass over the vertices and one over the faces, then a box test on the
-//     few faces near G). Of those, the patch P is the faces that may touch the blade (a conservative plane-side
-//     test against the blade triangles near them); the others lie strictly inside
+//  1. The faces of S whose bounding box meets the grown bounding box G of the blade come from S's FaceGrid (the cells
+//     G meets, then a box test). Of those, the patch P is the faces that may touch the blade (a conservative
+//     plane-side test against the blade triangles near them); the others lie strictly inside
 //     or strictly outside the blade, are grouped through shared vertices and classified with one exact point query
 //     per group: the inside ones go whole, the outside ones stay. A face outside G cannot touch the blade, so P's
 //     boundary edges stay untouched. Where P's faces would form several fans around a vertex, the faces around it
-//     are added, so every vertex of P is one CGAL vertex.
+//     are added (the grid lists them), so every vertex of P is one CGAL vertex.
 //  2. P is copied into a Surface_mesh and corefined with the blade (PMP::corefine, exact predicates), marking the
 //     intersection edges as constrained and recording, through a visitor, which input face each piece lies in.
 //  3. P and the blade are cut into regions along the constrained edges. A P region is removed when a point inside it
@@ -21,9 +20,12 @@
 //     test (axis rays, orientation predicates on S's input coordinates, retried on grazing rays) puts it inside S.
 //     Where options.removable rejects a region's test point, a P region is kept and a blade region without votes is
 //     discarded (the pipeline's restriction of B'_i to the material of component i).
-//  4. The kept pieces are stitched back into S in place of P and the gone faces: P's original vertices keep their
-//     indices, new vertices are matched between the two meshes by identical coordinates. The result is verified
-//     locally (verify_local and verify_self_intersections), and V(S) - V(S') is summed over the changed faces only.
+//  4. The kept pieces are written back into S in place (SurfaceEditor: journaled, the grid kept up to date): P's
+//     original vertices keep their indices, new vertices are matched between the two meshes by identical
+//     coordinates and appended, the pieces fill P's slots and the rest are appended or the leftover slots removed.
+//     The result is verified locally (verify_local and verify_self_intersections, with the unchanged neighbours
+//     from the grid), and V(S) - V(S') is summed over the changed faces only. Nothing is a pass over S: even the
+//     ray-parity test of step 3 takes the faces from the grid cells along its ray.
 #include "octocut/cutting/surface_cut.hpp"
 
 #include "cgal_exact.hpp"  // first: the exact number type of Epeck
@@ -195,15 +197,17 @@ Point centroid(const std::array<Point, 3>& p) { return CGAL::centroid(p[0], p[1]
 
 enum class Side { inside, outside, boundary, degenerate };
 
-// Exact parity of the crossings of S by the ray from q along +-axis `axis` (dir = +1 or -1). Every decision is an
-// exact orientation predicate on input coordinates; a ray through an edge or a vertex, or q on S, is reported.
-Side ray_parity(const sim::TriMesh& s, const Point& q, int axis, int dir) {
+// Exact parity of the crossings of S by the ray from q along +-axis `axis` (dir = +1 or -1), over `faces` (those
+// whose boxes meet the ray). Every decision is an exact orientation predicate on input coordinates; a ray through an
+// edge or a vertex, or q on S, is reported.
+Side ray_parity(const sim::TriMesh& s, const std::vector<int32_t>& faces, const Point& q, int axis, int dir) {
   const int u = (axis + 1) % 3;
   const int v = (axis + 2) % 3;
   const double qa = q[axis], qu = q[u], qv = q[v];
   const Point2 q2(qu, qv);
   int crossings = 0;
-  for (const Tri& t : s.triangles) {
+  for (const int32_t f : faces) {
+    const Tri& t = s.triangles[static_cast<std::size_t>(f)];
     const Vec3& a = s.vertices[static_cast<std::size_t>(t[0])];
     const Vec3& b = s.vertices[static_cast<std::size_t>(t[1])];
     const Vec3& c = s.vertices[static_cast<std::size_t>(t[2])];
@@ -242,11 +246,15 @@ Side ray_parity(const sim::TriMesh& s, const Point& q, int axis, int dir) {
   return (crossings % 2 == 1) ? Side::inside : Side::outside;
 }
 
-// Point q against the solid bounded by S: tries the six axis directions until one is not degenerate.
-Side point_in_surface(const sim::TriMesh& s, const Point& q) {
+// Point q against the solid bounded by S: tries the six axis directions until one is not degenerate. The faces a
+// ray may cross come from S's grid (the cells along the ray).
+Side point_in_surface(const sim::TriMesh& s, FaceGrid& grid, const Point& q) {
+  const Vec3 at = to_vec(q);
   for (int axis = 0; axis < 3; ++axis) {
     for (const int dir : {1, -1}) {
-      const Side side = ray_parity(s, q, axis, dir);
+      Vec3 lo = at, hi = at;  // the ray's box, m
+      (dir > 0 ? hi : lo)[axis] = dir * std::numeric_limits<double>::infinity();
+      const Side side = ray_parity(s, grid.query(s, lo, hi), q, axis, dir);
       if (side != Side::degenerate) return side;
     }
   }
@@ -487,12 +495,14 @@ void verify_self_intersections(const sim::TriMesh& out, const std::vector<int32_
 }
 
 // The whole cut; throws CutFailure.
-void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCutOptions& options,
-         SurfaceCutResult& result) {
+void cut(SurfaceEditor& editor, const sim::TriMesh& blade, const SurfaceCutOptions& options,
+         SurfaceEditResult& result) {
+  const sim::TriMesh& surface = editor.mesh();
+  FaceGrid& grid = editor.grid();
+  if (!grid.built()) throw CutFailure{"the surface has no face grid"};
   check_input(blade, "blade");
   if (blade.triangles.empty()) throw CutFailure{"blade has no triangles"};
   const auto nv = static_cast<int32_t>(surface.vertices.size());
-  const auto nf = static_cast<int32_t>(surface.triangles.size());
 
   // Blade: a closed, manifold, outward-oriented, self-intersection-free Surface_mesh.
   Mesh bmesh;
@@ -527,72 +537,8 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
   gmax.array() += margin;
   const Vec3 centre = 0.5 * (gmin + gmax);  // origin of the local volume sums, m
 
-  // P: the faces of S whose bounding box meets G. Faces within `reach` of G (their boxes meet G grown by reach) are
-  // remembered as candidates for P's unchanged neighbours; reach is four times the largest box extent among the
-  // first faces of S (a cheap size estimate; the closure and the verification fall back to a full pass when P's
-  // faces are larger).
-  const auto face_box = [&](const Tri& t, Vec3& lo, Vec3& hi) {
-    const Vec3& a = surface.vertices[static_cast<std::size_t>(t[0])];
-    const Vec3& b = surface.vertices[static_cast<std::size_t>(t[1])];
-    const Vec3& c = surface.vertices[static_cast<std::size_t>(t[2])];
-    lo = a.cwiseMin(b).cwiseMin(c);
-    hi = a.cwiseMax(b).cwiseMax(c);
-  };
-  const auto index_ok = [&](const Tri& t) {
-    return static_cast<uint32_t>(t[0]) < static_cast<uint32_t>(nv) &&
-           static_cast<uint32_t>(t[1]) < static_cast<uint32_t>(nv) &&
-           static_cast<uint32_t>(t[2]) < static_cast<uint32_t>(nv);
-  };
-  double reach = 0.0;  // m (may become infinite below)
-  for (int32_t f = 0; f < std::min<int32_t>(nf, 256); ++f) {
-    const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
-    if (!index_ok(t)) check_input(surface, "surface");
-    Vec3 lo, hi;
-    face_box(t, lo, hi);
-    reach = std::max(reach, 4.0 * (hi - lo).maxCoeff());
-  }
-  // One pass over the vertices computes Cohen-Sutherland outcodes against R, G grown by reach, from the sign bits of
-  // the differences (exact: a rounded difference keeps its sign, and is zero only for equal numbers), and checks that
-  // the coordinates are finite. A face's box misses R exactly when its three vertices share an outside bit; only the
-  // few faces whose boxes meet R are then tested against G itself. The pass reads S once and writes a byte per
-  // vertex.
-  std::vector<uint8_t> outcode(static_cast<std::size_t>(nv));  // (|V|)
-  {
-    const Vec3 rmin = gmin.array() - reach, rmax = gmax.array() + reach;  // m
-    const auto sign = [](double d) {  // 1 for a negative difference, 0 otherwise (NaN is caught below)
-      return static_cast<unsigned>(std::bit_cast<uint64_t>(d) >> 63);
-    };
-    const auto exponent_full = [](double d) {  // infinity or NaN
-      return (std::bit_cast<uint64_t>(d) & 0x7ff0000000000000ull) == 0x7ff0000000000000ull;
-    };
-    bool non_finite = false;
-    for (int32_t v = 0; v < nv; ++v) {
-      const Vec3& p = surface.vertices[static_cast<std::size_t>(v)];
-      non_finite |= exponent_full(p.x()) | exponent_full(p.y()) | exponent_full(p.z());
-      outcode[static_cast<std::size_t>(v)] = static_cast<uint8_t>(
-          sign(p.x() - rmin.x()) | sign(rmax.x() - p.x()) << 1 | sign(p.y() - rmin.y()) << 2 |
-          sign(rmax.y() - p.y()) << 3 | sign(p.z() - rmin.z()) << 4 | sign(rmax.z() - p.z()) << 5);
-    }
-    if (non_finite) check_input(surface, "surface");
-  }
-  std::vector<int32_t> patch;       // face indices of S, ascending
-  std::vector<int32_t> near_faces;  // faces of S outside P within `reach` of G, ascending
-  for (int32_t f = 0; f < nf; ++f) {
-    const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
-    if (!index_ok(t)) check_input(surface, "surface");
-    if ((outcode[static_cast<std::size_t>(t[0])] & outcode[static_cast<std::size_t>(t[1])] &
-         outcode[static_cast<std::size_t>(t[2])]) != 0) {
-      continue;
-    }
-    Vec3 lo, hi;
-    face_box(t, lo, hi);
-    const bool meets_g = (lo.array() <= gmax.array()).all() && (hi.array() >= gmin.array()).all();
-    (meets_g ? patch : near_faces).push_back(f);
-  }
-  // Of the faces in G, CGAL gets only those that may touch the blade: a face is left out (`clear`) when, against
-  // every blade triangle whose grown box its box meets, one of the two triangles lies strictly on one side of the
-  // other's plane (by more than a bound on the rounding of the plane test). A clear face cannot touch the blade's
-  // surface, so it lies strictly inside or strictly outside the blade; it is classified below, without CGAL.
+  // P: the faces of S whose bounding box meets G, from the grid (no pass over S).
+  std::vector<int32_t> patch = grid.query(surface, gmin, gmax);  // face indices of S, ascending
   std::vector<int32_t> region = patch;  // the faces whose box meets G, ascending
   {
     struct BladeTriangle {
@@ -652,43 +598,18 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
       if (may_touch) touching.push_back(f);
     }
     patch.swap(touching);
-    // The clear faces are candidates for the closure below, like the faces near G.
-    std::vector<int32_t> candidates;
-    std::set_difference(region.begin(), region.end(), patch.begin(), patch.end(), std::back_inserter(candidates));
-    const auto mid = static_cast<std::ptrdiff_t>(candidates.size());
-    candidates.insert(candidates.end(), near_faces.begin(), near_faces.end());
-    std::inplace_merge(candidates.begin(), candidates.begin() + mid, candidates.end());
-    near_faces.swap(candidates);
   }
   // Close P around the vertices where its faces form more than one fan (a pinched vertex would need one copy per
   // fan, and corefinement's self-intersection check would then see distinct vertices touching): add the faces
-  // around them (clear faces, or faces outside G), until no vertex is pinched.
+  // around them (clear faces, or faces outside G; the grid lists them), until no vertex is pinched.
   for (int round = 0; round < 32; ++round) {
     const std::vector<int32_t> pinched = pinched_vertices(surface, patch);
     if (pinched.empty()) break;
-    double extent = 0.0;  // largest box extent of P's faces, m
-    for (const int32_t f : patch) {
-      Vec3 lo, hi;
-      face_box(surface.triangles[static_cast<std::size_t>(f)], lo, hi);
-      extent = std::max(extent, (hi - lo).maxCoeff());
+    for (const int32_t v : pinched) {
+      for (const int32_t f : grid.around(surface, v)) patch.push_back(f);
     }
-    if (extent >= reach) {  // the faces around a pinched vertex may lie beyond `reach`: look at all of them
-      near_faces.clear();
-      for (int32_t f = 0; f < nf; ++f) {
-        if (!std::binary_search(patch.begin(), patch.end(), f)) near_faces.push_back(f);
-      }
-      reach = std::numeric_limits<double>::infinity();
-    }
-    std::vector<int32_t> rest;
-    for (const int32_t f : near_faces) {
-      const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
-      const bool touches = std::binary_search(pinched.begin(), pinched.end(), t[0]) ||
-                           std::binary_search(pinched.begin(), pinched.end(), t[1]) ||
-                           std::binary_search(pinched.begin(), pinched.end(), t[2]);
-      (touches ? patch : rest).push_back(f);
-    }
-    near_faces.swap(rest);
     std::sort(patch.begin(), patch.end());
+    patch.erase(std::unique(patch.begin(), patch.end()), patch.end());
   }
   result.patch_triangles = static_cast<int>(patch.size());
 
@@ -735,10 +656,6 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
         }
         if (sr == 1) gone.push_back(f);
       }
-      // near_faces holds the clear faces (closure candidates): the outside ones stay there, the gone ones leave.
-      std::vector<int32_t> rest;
-      std::set_difference(near_faces.begin(), near_faces.end(), gone.begin(), gone.end(), std::back_inserter(rest));
-      near_faces.swap(rest);
     }
   }
 
@@ -985,7 +902,7 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
                         w[0] * p[0].y() + w[1] * p[1].y() + w[2] * p[2].y(),
                         w[0] * p[0].z() + w[1] * p[1].z() + w[2] * p[2].z());
           if (!patch.empty() && p_tree->squared_distance(q) <= eps2) continue;
-          side = point_in_surface(surface, q);
+          side = point_in_surface(surface, grid, q);
           at = q;
           if (side == Side::inside || side == Side::outside) break;
         }
@@ -1005,9 +922,6 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
   if (p_all_kept && b_none_kept && gone.empty()) {
     result.status = SurfaceCutStatus::no_op;
     result.reason = "blade does not remove material from the surface (it misses it or only touches it)";
-    result.mesh = surface;
-    result.triangle_origin.resize(static_cast<std::size_t>(nf));
-    std::iota(result.triangle_origin.begin(), result.triangle_origin.end(), 0);
     return;
   }
 
@@ -1093,189 +1007,136 @@ void cut(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCu
     if (!used_old[i]) result.removed_vertices.push_back(p_old_sorted[i]);
   }
 
-  // Renumber: kept old vertices in order, then the new P vertices, then the new blade vertices.
-  // old_to_new (|V|): the new index of each old vertex, -1 when removed; filled range by range between removed ones.
-  std::vector<int32_t> old_to_new(static_cast<std::size_t>(nv));
-  const auto kept_count = static_cast<int32_t>(nv - static_cast<int32_t>(result.removed_vertices.size()));
-  sim::TriMesh& out = result.mesh;
-  // Reserved once for all (kept, then inserted), and appended to without zero-filling first.
-  out.vertices.reserve(static_cast<std::size_t>(kept_count) +
-                       static_cast<std::size_t>(std::count(used_new.begin(), used_new.end(), char(1))));
-  {
-    int32_t from = 0, shift = 0;
-    const auto copy_range = [&](int32_t to) {  // kept vertices [from, to)
-      std::iota(old_to_new.begin() + from, old_to_new.begin() + to, from - shift);
-      out.vertices.insert(out.vertices.end(), surface.vertices.begin() + from, surface.vertices.begin() + to);
-    };
-    for (const int v : result.removed_vertices) {
-      copy_range(v);
-      old_to_new[static_cast<std::size_t>(v)] = -1;
-      from = v + 1;
-      ++shift;
+  // The old triangles of P, their attributes and their share of the volume, read before anything is written.
+  std::vector<Tri> old_tris(patch.size());
+  std::vector<FaceAttributes> old_attributes(patch.size());
+  double volume_before = 0.0, volume_after = 0.0;  // m^3, over the changed faces, relative to `centre`
+  std::vector<char> whole(patch.size(), 0);  // per P face: kept whole (one piece with its own nodes): unchanged
+  for (std::size_t pi = 0; pi < patch.size(); ++pi) {
+    const Tri& t = surface.triangles[static_cast<std::size_t>(patch[pi])];
+    old_tris[pi] = t;
+    old_attributes[pi] = editor.attributes(patch[pi]);
+    const int begin = bucket_begin[pi], end = bucket_begin[pi + 1];
+    if (end - begin == 1) {
+      const Tri& only = p_pieces[static_cast<std::size_t>(begin)].first;
+      whole[pi] = only[0] < nv && only[1] < nv && only[2] < nv ? 1 : 0;
     }
-    copy_range(nv);
+    if (!whole[pi]) {
+      volume_before += tet_volume(centre, surface.vertices[static_cast<std::size_t>(t[0])],
+                                  surface.vertices[static_cast<std::size_t>(t[1])],
+                                  surface.vertices[static_cast<std::size_t>(t[2])]);
+    }
   }
+  // The directed edges of the unchanged faces along P's boundary (vertex indices do not change in place).
+  std::vector<std::array<int32_t, 2>> boundary_edges;
+  if (options.verify) {
+    std::unordered_map<uint64_t, char> p_directed;
+    const auto key = [](int32_t a, int32_t b) {
+      return (static_cast<uint64_t>(static_cast<uint32_t>(a)) << 32) | static_cast<uint32_t>(b);
+    };
+    for (const Tri& t : old_tris) {
+      for (int k = 0; k < 3; ++k) p_directed[key(t[k], t[(k + 1) % 3])] = 1;
+    }
+    for (const Tri& t : old_tris) {
+      for (int k = 0; k < 3; ++k) {
+        if (!p_directed.count(key(t[(k + 1) % 3], t[k]))) boundary_edges.push_back({t[(k + 1) % 3], t[k]});
+      }
+    }
+  }
+
+  // From here on S is edited in place (the caller rolls the edits back when this throws). New vertices are appended:
+  // the new P vertices, then the new blade vertices.
   std::vector<int32_t> new_to_out(used_new.size(), -1);
   std::vector<char> constructed_inserted;  // per inserted vertex: 1 for an intersection point (made by CGAL)
   const std::size_t blade_input_vertices = blade.vertices.size();
   for (std::size_t k = 0; k < used_new.size(); ++k) {
     if (!used_new[k]) continue;
-    new_to_out[k] = static_cast<int32_t>(out.vertices.size());
     constructed_inserted.push_back(
         k < static_cast<std::size_t>(n_new_p) || k - static_cast<std::size_t>(n_new_p) >= blade_input_vertices ? 1 : 0);
     const Point p = k < static_cast<std::size_t>(n_new_p)
                         ? pmesh.point(VI(static_cast<Mesh::size_type>(p_initial_vertices + k)))
                         : bmesh.point(VI(static_cast<Mesh::size_type>(k - static_cast<std::size_t>(n_new_p))));
-    out.vertices.push_back(to_vec(p));
+    new_to_out[k] = editor.add_vertex(to_vec(p));
   }
-  result.inserted_vertices.assign(out.vertices.begin() + kept_count, out.vertices.end());
-  const auto out_index = [&](int32_t n) {
-    return n < nv ? old_to_new[static_cast<std::size_t>(n)] : new_to_out[static_cast<std::size_t>(n - nv)];
-  };
+  const sim::TriMesh& out = editor.mesh();
+  const auto out_index = [&](int32_t n) { return n < nv ? n : new_to_out[static_cast<std::size_t>(n - nv)]; };
 
-  // Triangles: untouched faces in order, each patch face replaced by its kept pieces, then the blade faces.
-  std::vector<int32_t> changed;      // output triangles built from the corefinement (P's pieces and the blade's)
-  std::vector<char> changed_whole;   // per entry of `changed`: 1 for a face of S kept whole (not really changed)
-  out.triangles.reserve(static_cast<std::size_t>(nf) + b_pieces.size() + p_pieces.size());
-  result.triangle_origin.reserve(out.triangles.capacity());
-  double volume_before = 0.0, volume_after = 0.0;  // m^3, over the changed faces, relative to `centre`
+  // The new triangles: each P face's kept pieces (which inherit its attributes), then the blade's. They fill P's
+  // slots in order; the rest are appended, or the slots left over are removed (the last triangles move into them).
+  std::vector<int32_t> changed;     // triangles built from the corefinement (P's pieces and the blade's)
+  std::vector<char> changed_whole;  // per entry of `changed`: 1 for a face of S kept whole (not really changed)
   {
-    // The untouched faces [from, to), remapped (copied as they are when no vertex went).
-    const auto copy_faces = [&](int32_t from, int32_t to) {
-      // Copied in one piece, then remapped in place (the capacity is reserved: nothing moves).
-      const std::size_t at = out.triangles.size();
-      result.triangle_origin.resize(at + static_cast<std::size_t>(to - from));
-      std::iota(result.triangle_origin.begin() + static_cast<std::ptrdiff_t>(at), result.triangle_origin.end(), from);
-      out.triangles.insert(out.triangles.end(), surface.triangles.begin() + from, surface.triangles.begin() + to);
-      if (result.removed_vertices.empty()) return;
-      const int32_t first_removed = result.removed_vertices.front();  // ascending: below it, indices stay
-      for (std::size_t i = at; i < out.triangles.size(); ++i) {
-        for (int32_t& v : out.triangles[i]) {
-          if (v > first_removed) v = old_to_new[static_cast<std::size_t>(v)];
-        }
+    std::size_t slot = 0;
+    const auto place = [&](const Tri& n, FaceAttributes a, char kept_whole) {
+      const Tri o{out_index(n[0]), out_index(n[1]), out_index(n[2])};
+      int32_t f = 0;
+      if (slot < patch.size()) {
+        f = patch[slot++];
+        editor.set_face(f, o, a);
+      } else {
+        f = editor.add_face(o, a);
+      }
+      changed.push_back(f);
+      changed_whole.push_back(kept_whole);
+      if (!kept_whole) {
+        volume_after += tet_volume(centre, out.vertices[static_cast<std::size_t>(o[0])],
+                                   out.vertices[static_cast<std::size_t>(o[1])],
+                                   out.vertices[static_cast<std::size_t>(o[2])]);
       }
     };
-    int32_t next_face = 0;
     for (std::size_t pi = 0; pi < patch.size(); ++pi) {
-      const int32_t f = patch[pi];
-      copy_faces(next_face, f);
-      next_face = f + 1;
-      const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
-      const int begin = bucket_begin[pi], end = bucket_begin[pi + 1];
-      // A face kept whole (one piece with its own nodes) is unchanged and adds nothing to the volume difference.
-      const bool whole = end - begin == 1 && p_pieces[static_cast<std::size_t>(begin)].first[0] < nv &&
-                         p_pieces[static_cast<std::size_t>(begin)].first[1] < nv &&
-                         p_pieces[static_cast<std::size_t>(begin)].first[2] < nv;
-      if (!whole) {
-        volume_before += tet_volume(centre, surface.vertices[static_cast<std::size_t>(t[0])],
-                                    surface.vertices[static_cast<std::size_t>(t[1])],
-                                    surface.vertices[static_cast<std::size_t>(t[2])]);
-      }
-      for (int k = begin; k < end; ++k) {
-        const Tri& n = p_pieces[static_cast<std::size_t>(k)].first;
-        const Tri o{out_index(n[0]), out_index(n[1]), out_index(n[2])};
-        changed.push_back(static_cast<int32_t>(out.triangles.size()));
-        changed_whole.push_back(whole ? 1 : 0);
-        out.triangles.push_back(o);
-        result.triangle_origin.push_back(f);
-        if (!whole) {
-          volume_after += tet_volume(centre, out.vertices[static_cast<std::size_t>(o[0])],
-                                     out.vertices[static_cast<std::size_t>(o[1])],
-                                     out.vertices[static_cast<std::size_t>(o[2])]);
-        }
+      for (int k = bucket_begin[pi]; k < bucket_begin[pi + 1]; ++k) {
+        place(p_pieces[static_cast<std::size_t>(k)].first, old_attributes[pi], whole[pi]);
       }
     }
-    copy_faces(next_face, nf);
-    for (const Tri& n : b_pieces) {
-      const Tri o{out_index(n[0]), out_index(n[1]), out_index(n[2])};
-      changed.push_back(static_cast<int32_t>(out.triangles.size()));
-      changed_whole.push_back(0);
-      out.triangles.push_back(o);
-      result.triangle_origin.push_back(-1);
-      volume_after += tet_volume(centre, out.vertices[static_cast<std::size_t>(o[0])],
-                                 out.vertices[static_cast<std::size_t>(o[1])],
-                                 out.vertices[static_cast<std::size_t>(o[2])]);
-    }
+    for (const Tri& n : b_pieces) place(n, FaceAttributes{1, -1}, 0);
+    for (std::size_t s = patch.size(); s > slot; --s) editor.remove_face(patch[s - 1]);
   }
   result.removed_volume = volume_before - volume_after;
 
   if (options.verify) {
-    // The unchanged faces' edges along P's boundary, and the fans P had at its boundary vertices, in output indices.
-    std::vector<std::array<int32_t, 2>> boundary_edges;
-    std::unordered_map<int32_t, int> boundary_arcs;
-    for (const auto& [v, arcs] : patch_arcs) boundary_arcs[old_to_new[static_cast<std::size_t>(v)]] = arcs;
-    {
-      std::unordered_map<uint64_t, char> p_directed;
-      const auto key = [](int32_t a, int32_t b) {
-        return (static_cast<uint64_t>(static_cast<uint32_t>(a)) << 32) | static_cast<uint32_t>(b);
-      };
-      for (const int32_t f : patch) {
-        const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
-        for (int k = 0; k < 3; ++k) p_directed[key(t[k], t[(k + 1) % 3])] = 1;
-      }
-      for (const int32_t f : patch) {
-        const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
-        for (int k = 0; k < 3; ++k) {
-          const int32_t a = t[k], b = t[(k + 1) % 3];
-          if (!p_directed.count(key(b, a))) {
-            boundary_edges.push_back({old_to_new[static_cast<std::size_t>(b)], old_to_new[static_cast<std::size_t>(a)]});
-          }
-        }
-      }
-    }
-    verify_local(out, changed, boundary_edges, boundary_arcs);
-
-    // The unchanged neighbours: faces outside P with a vertex on P's boundary. Such a face is within the largest
-    // box extent of P's faces of G; when that is beyond `reach`, every face is looked at.
+    verify_local(out, changed, boundary_edges, patch_arcs);
+    // The unchanged neighbours: faces that are not changed and have a vertex on P's boundary (found in the grid,
+    // which follows the edits: a face moved into a removed slot is found at its new index).
+    std::vector<int32_t> changed_sorted = changed;
+    std::sort(changed_sorted.begin(), changed_sorted.end());
+    std::vector<int32_t> boundary_vertices;
+    boundary_vertices.reserve(patch_arcs.size());
+    for (const auto& [v, arcs] : patch_arcs) boundary_vertices.push_back(v);
+    std::sort(boundary_vertices.begin(), boundary_vertices.end());
     std::vector<int32_t> neighbours;
-    if (!patch_arcs.empty()) {
-      double extent = 0.0;  // m
-      for (const int32_t f : patch) {
-        const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
-        const Vec3& a = surface.vertices[static_cast<std::size_t>(t[0])];
-        const Vec3& b = surface.vertices[static_cast<std::size_t>(t[1])];
-        const Vec3& c = surface.vertices[static_cast<std::size_t>(t[2])];
-        extent = std::max(extent, (a.cwiseMax(b).cwiseMax(c) - a.cwiseMin(b).cwiseMin(c)).maxCoeff());
-      }
-      std::vector<char> on_boundary(static_cast<std::size_t>(nv), 0);  // old vertices of P's boundary
-      for (const auto& [v, arcs] : patch_arcs) on_boundary[static_cast<std::size_t>(v)] = 1;
-      std::vector<int32_t> all;
-      if (extent >= reach) {
-        for (int32_t f = 0; f < nf; ++f) {
-          if (!std::binary_search(patch.begin(), patch.end(), f)) all.push_back(f);
-        }
-      }
-      const std::vector<int32_t>& candidates = extent >= reach ? all : near_faces;
-      for (const int32_t f : candidates) {
-        const Tri& t = surface.triangles[static_cast<std::size_t>(f)];
-        if (!on_boundary[static_cast<std::size_t>(t[0])] && !on_boundary[static_cast<std::size_t>(t[1])] &&
-            !on_boundary[static_cast<std::size_t>(t[2])]) {
-          continue;
-        }
-        // Its index in S': f, less the patch faces before it, plus their pieces.
-        const auto k = static_cast<std::size_t>(std::lower_bound(patch.begin(), patch.end(), f) - patch.begin());
-        neighbours.push_back(f - static_cast<int32_t>(k) + bucket_begin[k]);
+    for (const int32_t v : boundary_vertices) {
+      for (const int32_t f : grid.around(out, v)) {
+        if (!std::binary_search(changed_sorted.begin(), changed_sorted.end(), f)) neighbours.push_back(f);
       }
     }
-    verify_self_intersections(out, changed, changed_whole, kept_count, constructed_inserted, neighbours);
+    std::sort(neighbours.begin(), neighbours.end());
+    neighbours.erase(std::unique(neighbours.begin(), neighbours.end()), neighbours.end());
+    verify_self_intersections(out, changed, changed_whole, nv, constructed_inserted, neighbours);
   }
   result.status = SurfaceCutStatus::ok;
 }
 
 }  // namespace
 
-SurfaceCutResult cut_surface(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCutOptions& options) {
+SurfaceEditResult cut_surface_in_place(SurfaceEditor& editor, const sim::TriMesh& blade,
+                                       const SurfaceCutOptions& options) {
   const auto start = std::chrono::steady_clock::now();
-  SurfaceCutResult result;
+  const std::size_t mark = editor.mark();
+  SurfaceEditResult result;
+  result.first_inserted = static_cast<int32_t>(editor.mesh().vertices.size());
   const auto fail = [&](std::string reason) {
+    editor.rollback(mark);
     const int patch = result.patch_triangles;
-    result = SurfaceCutResult{};
+    const int32_t first = result.first_inserted;
+    result = SurfaceEditResult{};
     result.status = SurfaceCutStatus::failed;
     result.reason = std::move(reason);
     result.patch_triangles = patch;
+    result.first_inserted = first;
   };
   try {
-    cut(surface, blade, options, result);
+    cut(editor, blade, options, result);
   } catch (const CutFailure& e) {
     fail(e.reason);
   } catch (const std::exception& e) {
@@ -1287,28 +1148,102 @@ SurfaceCutResult cut_surface(const sim::TriMesh& surface, const sim::TriMesh& bl
   return result;
 }
 
-std::pair<SurfaceCutResult, int> cut_surface_perturbing(const sim::TriMesh& surface, sim::TriMesh& blade,
-                                                        const SurfaceCutOptions& options) {
-  SurfaceCutResult first = cut_surface(surface, blade, options);
-  if (first.status != SurfaceCutStatus::failed || blade.vertices.empty()) return {std::move(first), 0};
+namespace {
+
+// Moves a blade by 1e-9 (attempt 1) or 1e-7 (attempt 2) of its bounding-box diagonal along a fixed generic direction.
+sim::TriMesh perturbed(const sim::TriMesh& blade, int attempt) {
   const sim::Box3 bb = sim::bounds(blade);
   const Vec3 direction = Vec3(0.5377, 0.8314, 0.1410).normalized();
-  int moves = 0;
-  for (const double eps : {1e-9, 1e-7}) {
-    ++moves;
-    sim::TriMesh moved = blade;
-    const Vec3 shift = eps * (bb.max - bb.min).norm() * direction;  // m
-    for (Vec3& p : moved.vertices) p += shift;
-    SurfaceCutResult again = cut_surface(surface, moved, options);
+  const Vec3 shift = (attempt == 1 ? 1e-9 : 1e-7) * (bb.max - bb.min).norm() * direction;  // m
+  sim::TriMesh moved = blade;
+  for (Vec3& p : moved.vertices) p += shift;
+  return moved;
+}
+
+// The retries of cut_surface_perturbing around any cut function of a blade.
+template <class Result, class Cut>
+std::pair<Result, int> perturbing(sim::TriMesh& blade, Cut&& cut_with) {
+  Result first = cut_with(blade);
+  if (first.status != SurfaceCutStatus::failed || blade.vertices.empty()) return {std::move(first), 0};
+  for (int attempt = 1; attempt <= 2; ++attempt) {
+    sim::TriMesh moved = perturbed(blade, attempt);
+    Result again = cut_with(moved);
     if (again.status != SurfaceCutStatus::failed) {
       blade = std::move(moved);
       again.ms += first.ms;
-      return {std::move(again), moves};
+      return {std::move(again), attempt};
     }
     first.ms += again.ms;
   }
   first.reason += " (also with the blade moved by 1e-9 and 1e-7 of its size)";
   return {std::move(first), 0};
+}
+
+}  // namespace
+
+std::pair<SurfaceEditResult, int> cut_surface_in_place_perturbing(SurfaceEditor& editor, sim::TriMesh& blade,
+                                                                  const SurfaceCutOptions& options) {
+  return perturbing<SurfaceEditResult>(
+      blade, [&](const sim::TriMesh& b) { return cut_surface_in_place(editor, b, options); });
+}
+
+SurfaceCutResult cut_surface(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCutOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  SurfaceCutResult result;
+  const auto elapsed = [&] {
+    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  };
+  try {
+    check_input(surface, "surface");
+  } catch (const CutFailure& e) {
+    result.status = SurfaceCutStatus::failed;
+    result.reason = e.reason;
+    result.ms = elapsed();
+    return result;
+  }
+  // A copy of S with its grid, edited in place, then compacted.
+  sim::TriMesh work = surface;
+  FaceGrid grid;
+  grid.build(work);
+  std::vector<int32_t> origin(surface.triangles.size());
+  std::iota(origin.begin(), origin.end(), 0);
+  SurfaceEditor editor(work, grid, nullptr, &origin);
+  SurfaceEditResult e = cut_surface_in_place(editor, blade, options);
+  result.status = e.status;
+  result.reason = std::move(e.reason);
+  result.removed_volume = e.removed_volume;
+  result.patch_triangles = e.patch_triangles;
+  result.blade_triangles_kept = e.blade_triangles_kept;
+  if (e.status == SurfaceCutStatus::no_op) {
+    result.mesh = surface;
+    result.triangle_origin = std::move(origin);
+  } else if (e.status == SurfaceCutStatus::ok) {
+    result.removed_vertices.assign(e.removed_vertices.begin(), e.removed_vertices.end());
+    std::vector<int32_t> old_to_new(work.vertices.size(), -1);
+    std::size_t r = 0;
+    int32_t next = 0;
+    for (std::size_t v = 0; v < work.vertices.size(); ++v) {
+      if (r < e.removed_vertices.size() && e.removed_vertices[r] == static_cast<int32_t>(v)) {
+        ++r;
+        continue;
+      }
+      old_to_new[v] = next++;
+      result.mesh.vertices.push_back(work.vertices[v]);
+    }
+    result.inserted_vertices.assign(work.vertices.begin() + e.first_inserted, work.vertices.end());
+    result.mesh.triangles = std::move(work.triangles);
+    for (Tri& t : result.mesh.triangles) {
+      for (int32_t& v : t) v = old_to_new[static_cast<std::size_t>(v)];
+    }
+    result.triangle_origin = std::move(origin);
+  }
+  result.ms = elapsed();
+  return result;
+}
+
+std::pair<SurfaceCutResult, int> cut_surface_perturbing(const sim::TriMesh& surface, sim::TriMesh& blade,
+                                                        const SurfaceCutOptions& options) {
+  return perturbing<SurfaceCutResult>(blade, [&](const sim::TriMesh& b) { return cut_surface(surface, b, options); });
 }
 
 }  // namespace octocut::cutting

@@ -319,6 +319,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
     cut_object.cut_faces.assign(cut_object.surface.triangles.size(), 0);
     cut_object.graph = object->graph;
     cut_object.surface_checked = true;  // load_mesh rejects a self-intersecting S; a box cannot intersect itself
+    cutting::index_surface(cut_object);  // the grid the cuts find S's faces near a blade with (O(|S|), once)
     const sim::TriMesh& surface = cut_object.surface;
     for (std::size_t i = 0; i < scene.tools.size(); ++i)
       if (scene.tools[i].collide)

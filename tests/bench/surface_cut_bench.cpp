@@ -35,6 +35,17 @@ const sim::TriMesh& blade() {
   return b;
 }
 
+// `one` with four translated copies of itself 0.1 m away.
+sim::TriMesh padded(const sim::TriMesh& one) {
+  sim::TriMesh m = one;
+  for (int k = 1; k <= 4; ++k) {
+    const auto offset = static_cast<int32_t>(m.vertices.size());
+    for (const sim::Vec3& p : one.vertices) m.vertices.push_back(p + sim::Vec3(0.1 * k, 0.0, 0.0));
+    for (const auto& t : one.triangles) m.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
+  }
+  return m;
+}
+
 void run(benchmark::State& state, const sim::TriMesh& surface) {
   const sim::TriMesh& b = blade();
   cutting::SurfaceCutResult r;
@@ -51,6 +62,30 @@ void run(benchmark::State& state, const sim::TriMesh& surface) {
   state.counters["removed_mm3"] = r.removed_volume * 1e9;
 }
 
+// The pipeline's form: S edited in place through its grid (built once, outside the timing), the edit rolled back
+// after each iteration (not timed).
+void run_in_place(benchmark::State& state, const sim::TriMesh& s) {
+  sim::TriMesh mesh = s;
+  cutting::FaceGrid grid;
+  grid.build(mesh);
+  std::vector<char> cut(mesh.triangles.size(), 0);
+  cutting::SurfaceEditor editor(mesh, grid, &cut);
+  const sim::TriMesh& b = blade();
+  cutting::SurfaceEditResult r;
+  for (auto _ : state) {
+    r = cutting::cut_surface_in_place(editor, b);
+    if (r.status != cutting::SurfaceCutStatus::ok) {
+      state.SkipWithError(("cut failed: " + r.reason).c_str());
+      return;
+    }
+    state.PauseTiming();
+    editor.rollback(0);
+    state.ResumeTiming();
+  }
+  state.counters["surface_triangles"] = static_cast<double>(s.triangles.size());
+  state.counters["patch_triangles"] = r.patch_triangles;
+}
+
 void BM_SurfaceCut_Meniscus10k(benchmark::State& state) {
   static const sim::TriMesh s = load("meniscus_10k.ply");
   run(state, s);
@@ -59,6 +94,19 @@ void BM_SurfaceCut_Meniscus50k(benchmark::State& state) {
   static const sim::TriMesh s = load("meniscus_50k.ply");
   run(state, s);
 }
+// The 10k meniscus with four translated copies of itself 0.1 m away: |S| as at 50k (50k vertices), the patch exactly
+// as at 10k. The difference to BM_SurfaceCut_Meniscus10k is the part of the cut that grows with |S|; the difference
+// between BM_SurfaceCut_Meniscus50k and this one is the growth of the local work with the mesh resolution.
+void BM_SurfaceCut_Meniscus10kPadded(benchmark::State& state) {
+  static const sim::TriMesh s = padded(load("meniscus_10k.ply"));
+  run(state, s);
+}
+void BM_SurfaceCutInPlace_Meniscus10k(benchmark::State& state) { run_in_place(state, load("meniscus_10k.ply")); }
+void BM_SurfaceCutInPlace_Meniscus10kPadded(benchmark::State& state) {
+  const sim::TriMesh one = load("meniscus_10k.ply");
+  run_in_place(state, padded(one));
+}
+void BM_SurfaceCutInPlace_Meniscus50k(benchmark::State& state) { run_in_place(state, load("meniscus_50k.ply")); }
 void BM_SurfaceCut_Meniscus50kNoVerify(benchmark::State& state) {
   static const sim::TriMesh s = load("meniscus_50k.ply");
   const sim::TriMesh& b = blade();
@@ -71,7 +119,11 @@ void BM_SurfaceCut_Meniscus50kNoVerify(benchmark::State& state) {
 }
 
 BENCHMARK(BM_SurfaceCut_Meniscus10k)->Unit(benchmark::kMillisecond)->Repetitions(5)->ReportAggregatesOnly(true);
+BENCHMARK(BM_SurfaceCut_Meniscus10kPadded)->Unit(benchmark::kMillisecond)->Repetitions(5)->ReportAggregatesOnly(true);
 BENCHMARK(BM_SurfaceCut_Meniscus50k)->Unit(benchmark::kMillisecond)->Repetitions(5)->ReportAggregatesOnly(true);
+BENCHMARK(BM_SurfaceCutInPlace_Meniscus10k)->Unit(benchmark::kMillisecond)->Repetitions(5)->ReportAggregatesOnly(true);
+BENCHMARK(BM_SurfaceCutInPlace_Meniscus10kPadded)->Unit(benchmark::kMillisecond)->Repetitions(5)->ReportAggregatesOnly(true);
+BENCHMARK(BM_SurfaceCutInPlace_Meniscus50k)->Unit(benchmark::kMillisecond)->Repetitions(5)->ReportAggregatesOnly(true);
 BENCHMARK(BM_SurfaceCut_Meniscus50kNoVerify)->Unit(benchmark::kMillisecond)->Repetitions(5)->ReportAggregatesOnly(true);
 
 }  // namespace

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <map>
 #include <numbers>
+#include <random>
 
 #include "octocut/cutting/cutting.hpp"
 #include "octocut/cutting/mesh_check.hpp"
@@ -112,6 +113,54 @@ TEST(CutPipeline, PunchThroughASlabAtRest) {
   for (int i = 0; i < 5; ++i) o.sim->step();
   for (const Vec3& x : o.sim->state().x) ASSERT_TRUE(x.allFinite());
   EXPECT_EQ(o.sim->stats().failed_steps, 0);
+}
+
+TEST(CutPipeline, SurfaceGridFollowsSThroughCutsAndCopies) {
+  // S is edited in place through its grid: after three punches (one of them through earlier cut walls) the grid
+  // lists exactly the triangles a brute-force box test finds, S has no unused vertex, and the embedding holds S. A
+  // copy of the object gets no grid of its own until it is cut, and cutting it leaves the original alone.
+  Object o = make_object(kSlab, kSlabRoot, 4, 7, {left_handle()});
+  cutting::index_surface(o.cut);
+  ASSERT_TRUE(cutting::surface_indexed(o.cut));
+  const double r = 0.0015;
+  for (const Vec3& c : {Vec3(0.02, 0.02, 0.002), Vec3(0.03, 0.021, 0.002), Vec3(0.022, 0.0205, 0.002)}) {
+    const auto out = cut(o, prism(c, r, 0.01, 24), r * std::cos(std::numbers::pi / 24));
+    ASSERT_EQ(out.status, "ok") << out.reason;
+    ASSERT_TRUE(cutting::surface_indexed(o.cut));
+  }
+  const sim::TriMesh& s = o.cut.surface;
+  expect_watertight(s, "surface");  // includes: no unused vertex
+  EXPECT_EQ(o.emb->rest_vertices(), s.vertices);
+  EXPECT_EQ(o.emb->triangles(), s.triangles);
+  EXPECT_EQ(o.cut.cut_faces.size(), s.triangles.size());
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-0.005, 0.045), w(0.0, 0.01);
+  for (int q = 0; q < 300; ++q) {
+    const Vec3 lo(u(rng), u(rng), u(rng) * 0.2), hi = lo + Vec3(w(rng), w(rng), w(rng));
+    std::vector<int32_t> truth;
+    for (std::size_t f = 0; f < s.triangles.size(); ++f) {
+      Vec3 a = s.vertices[std::size_t(s.triangles[f][0])], b = a;
+      for (const int32_t v : s.triangles[f]) {
+        a = a.cwiseMin(s.vertices[std::size_t(v)]);
+        b = b.cwiseMax(s.vertices[std::size_t(v)]);
+      }
+      if ((a.array() <= hi.array()).all() && (b.array() >= lo.array()).all()) truth.push_back(int32_t(f));
+    }
+    ASSERT_EQ(o.cut.grid.grid->query(s, lo, hi), truth) << "box " << q;
+  }
+
+  const cutting::CutObject copy_of = o.cut;
+  EXPECT_FALSE(cutting::surface_indexed(copy_of));
+  const sim::TriMesh before = o.cut.surface;
+  cutting::CutObject copied = o.cut;
+  auto sim2 = std::make_unique<sim::Simulator>(o.sim->model(), o.sim->options());
+  sim::SurfaceEmbedding emb2(sim2->model(), copied.surface.vertices, copied.surface.triangles);
+  const auto out = cutting::apply_cut(copied, *sim2, emb2, {prism(Vec3(0.015, 0.03, 0.002), r, 0.01, 24), r * 0.9}, {});
+  ASSERT_EQ(out.status, "ok") << out.reason;
+  EXPECT_TRUE(cutting::surface_indexed(copied));
+  EXPECT_EQ(o.cut.surface.vertices, before.vertices);
+  EXPECT_EQ(o.cut.surface.triangles, before.triangles);
+  expect_watertight(copied.surface, "copy");
 }
 
 TEST(CutPipeline, BladeFlushWithTheSurfaceAndOnItsVertices) {

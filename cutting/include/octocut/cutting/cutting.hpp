@@ -8,6 +8,7 @@
 #include <string_view>
 #include <vector>
 
+#include "octocut/cutting/surface_editor.hpp"
 #include "octocut/sim/embedding.hpp"
 #include "octocut/sim/material_graph.hpp"
 #include "octocut/sim/simulator.hpp"
@@ -36,6 +37,23 @@ struct CutOptions {
   bool verify = true;                           ///< check S after the boolean (closed, manifold, no self-intersection)
 };
 
+/// The FaceGrid of CutObject::surface and the sizes of S it matches. A copy starts empty: the copy's grid is built
+/// for its own surface when that is first cut.
+struct SurfaceGrid {
+  std::unique_ptr<FaceGrid> grid;
+  std::size_t vertices = 0, triangles = 0;  ///< |V| and |F| of the surface it was built or last updated for
+
+  SurfaceGrid() = default;
+  SurfaceGrid(const SurfaceGrid&) {}
+  SurfaceGrid& operator=(const SurfaceGrid& other) {
+    if (this != &other) *this = SurfaceGrid{};
+    return *this;
+  }
+  SurfaceGrid(SurfaceGrid&&) noexcept = default;
+  SurfaceGrid& operator=(SurfaceGrid&&) noexcept = default;
+  ~SurfaceGrid() = default;
+};
+
 /// The parts of one deformable object that cuts edit, besides the simulator and the embedding.
 struct CutObject {
   sim::TriMesh surface;                              ///< S in rest space, m
@@ -46,7 +64,17 @@ struct CutObject {
                                  ///< it was loaded). Cuts then skip CGAL's own self-intersection check of S near the
                                  ///< blade; a cut with CutOptions::verify keeps this true (its changed faces are
                                  ///< checked), one without sets it false. Leave it false for an unchecked S
+  SurfaceGrid grid;  ///< the grid over S's triangles that finds those near a blade; apply_cut keeps it up to date.
+                     ///< Call index_surface after setting or changing `surface` yourself (else the next cut builds
+                     ///< it, an O(|S|) cost in its surface stage)
 };
+
+/// Builds object.grid over object.surface: O(|S|), once after loading S. Throws std::invalid_argument naming the
+/// first non-finite vertex or triangle index out of range.
+void index_surface(CutObject& object);
+
+/// Whether object.grid matches object.surface (the same |V| and |F|; apply_cut keeps them in step).
+[[nodiscard]] bool surface_indexed(const CutObject& object);
 
 /// One cut event: the blade where it is when the cut happens.
 struct CutRequest {

@@ -1,12 +1,14 @@
 #pragma once
 // Stage 2 of the cut pipeline (SPEC §4): the exact, local surface boolean S' = S \ B'. Only the faces of S near the
-// blade take part in the CGAL corefinement; the result is stitched back into S. CGAL stays inside surface_cut.cpp.
+// blade take part in the CGAL corefinement; the result is stitched back into S in place. CGAL stays inside
+// surface_cut.cpp.
 #include <cstdint>
 #include <functional>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "octocut/cutting/surface_editor.hpp"
 #include "octocut/sim/surface.hpp"
 
 namespace octocut::cutting {
@@ -47,9 +49,8 @@ struct SurfaceCutResult {
   std::vector<int> removed_vertices;         ///< old indices of vertices not in S', ascending
   std::vector<sim::Vec3> inserted_vertices;  ///< == mesh.vertices[k..], m
   std::vector<int32_t> triangle_origin;      ///< (|F'|) old triangle index each new triangle lies in, or -1 for a
-                                             ///< triangle of the blade (a cut face). Untouched triangles keep their
-                                             ///< relative order; the pieces of a patch triangle take its place; blade
-                                             ///< triangles come last
+                                             ///< triangle of the blade (a cut face). The triangles are in the order
+                                             ///< of the in-place edit (see cut_surface_in_place)
   double removed_volume = 0.0;               ///< V(S) - V(S'), m^3, computed from the changed faces only (divergence
                                              ///< theorem)
   int patch_triangles = 0;                   ///< triangles of S handed to CGAL
@@ -57,10 +58,37 @@ struct SurfaceCutResult {
   double ms = 0.0;                           ///< wall time of the call, ms
 };
 
+/// What cut_surface_in_place did.
+struct SurfaceEditResult {
+  SurfaceCutStatus status = SurfaceCutStatus::failed;
+  std::string reason;                 ///< why no_op or failed (human readable, names the first offending thing)
+  std::vector<int32_t> removed_vertices;  ///< vertices of S that no triangle uses any more, ascending. They stay in
+                                          ///< S.vertices (unused) until the owner compacts S
+  int32_t first_inserted = 0;         ///< S.vertices[first_inserted..] are the vertices this cut added
+  double removed_volume = 0.0;        ///< V(S) - V(S'), m^3, from the changed faces only
+  int patch_triangles = 0;            ///< triangles of S handed to CGAL
+  int blade_triangles_kept = 0;       ///< triangles of the blade (after corefinement) that are in S'
+  double ms = 0.0;                    ///< wall time of the call, ms
+};
+
+/// S \ B' in place, as cut_surface computes it, on the surface `editor` edits (its grid built over it). The faces
+/// near the blade come from the grid, and the result is written into S: the kept pieces of each patch triangle and
+/// the kept blade triangles fill the patch triangles' slots in order, the rest are appended, and slots left over
+/// are removed by moving the last triangles into them; pieces inherit their triangle's attributes, blade triangles
+/// get cut = 1, origin = -1. New vertices are appended; vertices no longer used stay (result.removed_vertices).
+/// Nothing in it is a pass over S: its cost depends on the faces near the blade, not on |S|.
+/// When the result is not ok, S is exactly as it was (the editor's journal is rolled back); otherwise the edits stay
+/// in the journal for the caller to roll back or commit.
+SurfaceEditResult cut_surface_in_place(SurfaceEditor& editor, const sim::TriMesh& blade,
+                                       const SurfaceCutOptions& options = {});
+
+/// cut_surface_in_place with the retries of cut_surface_perturbing.
+std::pair<SurfaceEditResult, int> cut_surface_in_place_perturbing(SurfaceEditor& editor, sim::TriMesh& blade,
+                                                                  const SurfaceCutOptions& options = {});
+
 /// S \ B': removes the solid bounded by the closed, outward-oriented blade from the solid bounded by the closed,
-/// outward-oriented, manifold surface. The cost of the exact part (CGAL corefinement and classification) depends only
-/// on the faces of S whose bounding boxes meet the blade's grown bounding box, not on |S|; the rest is a few linear
-/// passes over plain arrays.
+/// outward-oriented, manifold surface, returning a new mesh: it copies S, builds a FaceGrid over the copy (O(|S|)),
+/// runs cut_surface_in_place on it and compacts the result (kept vertices in order, new ones after them).
 ///
 /// Outcomes: a blade that misses S, or only touches it from outside, gives no_op. A blade entirely inside S leaves a
 /// cavity (an extra inner component, the reversed blade). A blade containing S gives ok with an empty mesh. Any

@@ -634,10 +634,8 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
       for (int32_t v = unused.front() + 1; v < n; ++v)
         if (old_to_new[std::size_t(v)] >= 0) vs[std::size_t(old_to_new[std::size_t(v)])] = vs[std::size_t(v)];
       vs.resize(vs.size() - unused.size());
-      const int32_t first_unused = unused.front();
-      for (auto& t : object.surface.triangles)
-        for (int32_t& v : t)
-          if (v > first_unused) v = old_to_new[std::size_t(v)];
+      // The embedding holds the remapped triangles (the edit's, taken over): copied into S's own storage.
+      object.surface.triangles.assign(embedding.triangles().begin(), embedding.triangles().end());
     }
     object.grid.vertices = object.surface.vertices.size();
     object.grid.triangles = object.surface.triangles.size();

@@ -60,13 +60,13 @@ void FaceGrid::build(const sim::TriMesh& mesh) {
   mean_edge /= nf;
   const Vec3 extent = hi - lo;
   double cell = std::max(2.0 * mean_edge, 1e-12 * std::max(1.0, extent.maxCoeff()));
-  // At most about two cells per triangle (and at least one cell).
+  // At most about one cell per two triangles (and at least one cell).
   const auto cells_for = [&](double h) {
     double n = 1.0;
     for (int k = 0; k < 3; ++k) n *= std::floor(extent[k] / h) + 1.0;
     return n;
   };
-  while (cells_for(cell) > 2.0 * nf + 64.0) cell *= 1.25;
+  while (cells_for(cell) > 0.5 * nf + 64.0) cell *= 1.25;
   m_origin = lo;
   m_cell = cell;
   for (int k = 0; k < 3; ++k) m_dims[static_cast<std::size_t>(k)] = static_cast<int>(std::floor(extent[k] / cell)) + 1;
@@ -75,16 +75,27 @@ void FaceGrid::build(const sim::TriMesh& mesh) {
                  {});
   m_stamp.assign(mesh.triangles.size(), 0);
   m_query = 0;
+  // Counted first, so that each cell is allocated once.
+  std::vector<uint32_t> count(m_cells.size(), 0);
+  const auto index = [&](const std::vector<int32_t>& cell) { return static_cast<std::size_t>(&cell - m_cells.data()); };
+  for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
+    Vec3 a, b;
+    face_box(mesh, static_cast<int32_t>(f), a, b);
+    for_cells(a, b, [&](std::vector<int32_t>& cell) { ++count[index(cell)]; });
+  }
+  for (std::size_t c = 0; c < m_cells.size(); ++c) m_cells[c].reserve(count[c]);
   for (std::size_t f = 0; f < mesh.triangles.size(); ++f) insert(mesh, static_cast<int32_t>(f));
 }
 
 std::array<int, 3> FaceGrid::cell_of(const Vec3& p) const {
+  // (p - origin) / cell, truncated: monotone in p, which is all that insert, erase and query need to agree.
   std::array<int, 3> c{};
+  const double inverse = 1.0 / m_cell;  // 1/m
   for (int k = 0; k < 3; ++k) {
-    const double x = std::floor((p[k] - m_origin[k]) / m_cell);
+    const double x = (p[k] - m_origin[k]) * inverse;
     const int n = m_dims[static_cast<std::size_t>(k)];
-    // NaN compares false both ways and lands in cell 0; positions are finite here.
-    c[static_cast<std::size_t>(k)] = x <= 0.0 ? 0 : (x >= static_cast<double>(n - 1) ? n - 1 : static_cast<int>(x));
+    // NaN and anything below 1 land in cell 0 (positions are finite here; a query may pass infinities).
+    c[static_cast<std::size_t>(k)] = !(x >= 1.0) ? 0 : (x >= static_cast<double>(n - 1) ? n - 1 : static_cast<int>(x));
   }
   return c;
 }

@@ -107,6 +107,15 @@ void BM_SurfaceCutInPlace_Meniscus10kPadded(benchmark::State& state) {
   run_in_place(state, padded(one));
 }
 void BM_SurfaceCutInPlace_Meniscus50k(benchmark::State& state) { run_in_place(state, load("meniscus_50k.ply")); }
+// The grid over S that the pipeline builds once per object (cutting::index_surface), at 50k vertices.
+void BM_FaceGrid_Build50k(benchmark::State& state) {
+  static const sim::TriMesh s = load("meniscus_50k.ply");
+  for (auto _ : state) {
+    cutting::FaceGrid grid;
+    grid.build(s);
+    benchmark::DoNotOptimize(grid.dims());
+  }
+}
 void BM_SurfaceCut_Meniscus50kNoVerify(benchmark::State& state) {
   static const sim::TriMesh s = load("meniscus_50k.ply");
   const sim::TriMesh& b = blade();
@@ -124,6 +133,7 @@ BENCHMARK(BM_SurfaceCut_Meniscus50k)->Unit(benchmark::kMillisecond)->Repetitions
 BENCHMARK(BM_SurfaceCutInPlace_Meniscus10k)->Unit(benchmark::kMillisecond)->Repetitions(5)->ReportAggregatesOnly(true);
 BENCHMARK(BM_SurfaceCutInPlace_Meniscus10kPadded)->Unit(benchmark::kMillisecond)->Repetitions(5)->ReportAggregatesOnly(true);
 BENCHMARK(BM_SurfaceCutInPlace_Meniscus50k)->Unit(benchmark::kMillisecond)->Repetitions(5)->ReportAggregatesOnly(true);
+BENCHMARK(BM_FaceGrid_Build50k)->Unit(benchmark::kMillisecond)->Repetitions(5)->ReportAggregatesOnly(true);
 BENCHMARK(BM_SurfaceCut_Meniscus50kNoVerify)->Unit(benchmark::kMillisecond)->Repetitions(5)->ReportAggregatesOnly(true);
 
 }  // namespace

@@ -358,22 +358,32 @@ void verify_local(const sim::TriMesh& out, const std::vector<int32_t>& changed,
     }
   }
 
-  // Closed, edge-manifold, oriented: every directed edge once, and its reverse once.
-  std::unordered_map<uint64_t, int> directed;
+  // Closed, edge-manifold, oriented: every directed edge once, and its reverse once (a sorted list of the directed
+  // edges; the first offender in that order is reported).
+  std::vector<uint64_t> directed;
   directed.reserve(changed.size() * 3 + boundary_edges.size());
   const auto key = [](int32_t a, int32_t b) {
     return (static_cast<uint64_t>(static_cast<uint32_t>(a)) << 32) | static_cast<uint32_t>(b);
   };
   for (const int32_t f : changed) {
     const Tri& t = out.triangles[static_cast<std::size_t>(f)];
-    for (int k = 0; k < 3; ++k) ++directed[key(t[k], t[(k + 1) % 3])];
+    for (int k = 0; k < 3; ++k) directed.push_back(key(t[k], t[(k + 1) % 3]));
   }
-  for (const auto& e : boundary_edges) ++directed[key(e[0], e[1])];
-  for (const auto& [k, n] : directed) {
+  for (const auto& e : boundary_edges) directed.push_back(key(e[0], e[1]));
+  std::sort(directed.begin(), directed.end());
+  const auto uses = [&](uint64_t k) {
+    const auto [lo, hi] = std::equal_range(directed.begin(), directed.end(), k);
+    return static_cast<int>(hi - lo);
+  };
+  for (std::size_t i = 0; i < directed.size();) {
+    const uint64_t k = directed[i];
+    std::size_t j = i;
+    while (j < directed.size() && directed[j] == k) ++j;
+    const int n = static_cast<int>(j - i);
+    i = j;
     const auto a = static_cast<int32_t>(k >> 32);
     const auto b = static_cast<int32_t>(k & 0xffffffffu);
-    const auto it = directed.find(key(b, a));
-    const int back = it == directed.end() ? 0 : it->second;
+    const int back = uses(key(b, a));
     if (n != 1 || back != 1) {
       throw CutFailure{"result edge (" + std::to_string(a) + ", " + std::to_string(b) + ") is used " +
                        std::to_string(n) + " times in this direction and " + std::to_string(back) +
@@ -1030,16 +1040,20 @@ void cut(SurfaceEditor& editor, const sim::TriMesh& blade, const SurfaceCutOptio
   // The directed edges of the unchanged faces along P's boundary (vertex indices do not change in place).
   std::vector<std::array<int32_t, 2>> boundary_edges;
   if (options.verify) {
-    std::unordered_map<uint64_t, char> p_directed;
+    std::vector<uint64_t> p_directed;  // sorted
+    p_directed.reserve(old_tris.size() * 3);
     const auto key = [](int32_t a, int32_t b) {
       return (static_cast<uint64_t>(static_cast<uint32_t>(a)) << 32) | static_cast<uint32_t>(b);
     };
     for (const Tri& t : old_tris) {
-      for (int k = 0; k < 3; ++k) p_directed[key(t[k], t[(k + 1) % 3])] = 1;
+      for (int k = 0; k < 3; ++k) p_directed.push_back(key(t[k], t[(k + 1) % 3]));
     }
+    std::sort(p_directed.begin(), p_directed.end());
     for (const Tri& t : old_tris) {
       for (int k = 0; k < 3; ++k) {
-        if (!p_directed.count(key(t[(k + 1) % 3], t[k]))) boundary_edges.push_back({t[(k + 1) % 3], t[k]});
+        if (!std::binary_search(p_directed.begin(), p_directed.end(), key(t[(k + 1) % 3], t[k]))) {
+          boundary_edges.push_back({t[(k + 1) % 3], t[k]});
+        }
       }
     }
   }

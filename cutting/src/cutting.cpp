@@ -552,8 +552,7 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
         if (2 * in_gone[std::size_t(c)] > total[std::size_t(c)]) drop.push_back(int32_t(f));
       }
       if (!drop.empty()) {
-        // Removed from the last down: the triangle that moves into a removed one's place is always one that stays.
-        for (auto it = drop.rbegin(); it != drop.rend(); ++it) editor.remove_face(*it);
+        editor.remove_faces(drop);
         // The vertices that no triangle uses any more join `unused`.
         std::vector<char> used(current.vertices.size(), 0);
         for (const auto& t : current.triangles)

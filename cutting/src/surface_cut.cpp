@@ -51,6 +51,8 @@
 #include <limits>
 #include <numeric>
 #include <optional>
+#include <span>
+#include <stdexcept>
 #include <string>
 #include <unordered_map>
 #include <utility>
@@ -110,6 +112,11 @@ double tet_volume(const Vec3& o, const Vec3& a, const Vec3& b, const Vec3& c) {
 }
 
 bool finite(const Vec3& p) { return std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z()); }
+
+// The directed edge (a, b) as one sortable number.
+uint64_t directed_edge_key(int32_t a, int32_t b) {
+  return (static_cast<uint64_t>(static_cast<uint32_t>(a)) << 32) | static_cast<uint32_t>(b);
+}
 
 // Checks coordinates and indices of a mesh; throws CutFailure naming the first offender.
 void check_input(const sim::TriMesh& mesh, const char* name) {
@@ -362,9 +369,7 @@ void verify_local(const sim::TriMesh& out, const std::vector<int32_t>& changed,
   // edges; the first offender in that order is reported).
   std::vector<uint64_t> directed;
   directed.reserve(changed.size() * 3 + boundary_edges.size());
-  const auto key = [](int32_t a, int32_t b) {
-    return (static_cast<uint64_t>(static_cast<uint32_t>(a)) << 32) | static_cast<uint32_t>(b);
-  };
+  const auto key = directed_edge_key;
   for (const int32_t f : changed) {
     const Tri& t = out.triangles[static_cast<std::size_t>(f)];
     for (int k = 0; k < 3; ++k) directed.push_back(key(t[k], t[(k + 1) % 3]));
@@ -1042,9 +1047,7 @@ void cut(SurfaceEditor& editor, const sim::TriMesh& blade, const SurfaceCutOptio
   if (options.verify) {
     std::vector<uint64_t> p_directed;  // sorted
     p_directed.reserve(old_tris.size() * 3);
-    const auto key = [](int32_t a, int32_t b) {
-      return (static_cast<uint64_t>(static_cast<uint32_t>(a)) << 32) | static_cast<uint32_t>(b);
-    };
+    const auto key = directed_edge_key;
     for (const Tri& t : old_tris) {
       for (int k = 0; k < 3; ++k) p_directed.push_back(key(t[k], t[(k + 1) % 3]));
     }
@@ -1104,7 +1107,7 @@ void cut(SurfaceEditor& editor, const sim::TriMesh& blade, const SurfaceCutOptio
       }
     }
     for (const Tri& n : b_pieces) place(n, FaceAttributes{1, -1}, 0);
-    for (std::size_t s = patch.size(); s > slot; --s) editor.remove_face(patch[s - 1]);
+    editor.remove_faces(std::span<const int32_t>(patch).subspan(slot));
   }
   result.removed_volume = volume_before - volume_after;
 
@@ -1207,18 +1210,17 @@ SurfaceCutResult cut_surface(const sim::TriMesh& surface, const sim::TriMesh& bl
   const auto elapsed = [&] {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   };
+  // A copy of S with its grid (whose build checks S's coordinates and indices), edited in place, then compacted.
+  sim::TriMesh work = surface;
+  FaceGrid grid;
   try {
-    check_input(surface, "surface");
-  } catch (const CutFailure& e) {
+    grid.build(work);
+  } catch (const std::invalid_argument& e) {
     result.status = SurfaceCutStatus::failed;
-    result.reason = e.reason;
+    result.reason = e.what();
     result.ms = elapsed();
     return result;
   }
-  // A copy of S with its grid, edited in place, then compacted.
-  sim::TriMesh work = surface;
-  FaceGrid grid;
-  grid.build(work);
   std::vector<int32_t> origin(surface.triangles.size());
   std::iota(origin.begin(), origin.end(), 0);
   SurfaceEditor editor(work, grid, nullptr, &origin);

@@ -30,14 +30,14 @@ void FaceGrid::build(const sim::TriMesh& mesh) {
   const auto nv = mesh.vertices.size();
   for (std::size_t v = 0; v < nv; ++v) {
     if (!mesh.vertices[v].allFinite()) {
-      throw std::invalid_argument("surface vertex " + std::to_string(v) + " is not finite");
+      throw std::invalid_argument("surface vertex " + std::to_string(v) + " has a non-finite coordinate");
     }
   }
   for (std::size_t f = 0; f < mesh.triangles.size(); ++f) {
     for (const int32_t v : mesh.triangles[f]) {
       if (v < 0 || static_cast<std::size_t>(v) >= nv) {
         throw std::invalid_argument("surface triangle " + std::to_string(f) + " has vertex index " +
-                                    std::to_string(v) + " out of range");
+                                    std::to_string(v) + ", outside [0, " + std::to_string(nv) + ")");
       }
     }
   }
@@ -252,6 +252,10 @@ int32_t SurfaceEditor::remove_face(int32_t f) {
     m_origin->pop_back();
   }
   return last;
+}
+
+void SurfaceEditor::remove_faces(std::span<const int32_t> ascending) {
+  for (auto it = ascending.rbegin(); it != ascending.rend(); ++it) remove_face(*it);
 }
 
 void SurfaceEditor::rollback(std::size_t mark) {

@@ -149,13 +149,12 @@ TEST(CutPipeline, SurfaceGridFollowsSThroughCutsAndCopies) {
     ASSERT_EQ(o.cut.grid.grid->query(s, lo, hi), truth) << "box " << q;
   }
 
-  const cutting::CutObject copy_of = o.cut;
-  EXPECT_FALSE(cutting::surface_indexed(copy_of));
   const sim::TriMesh before = o.cut.surface;
   cutting::CutObject copied = o.cut;
-  auto sim2 = std::make_unique<sim::Simulator>(o.sim->model(), o.sim->options());
-  sim::SurfaceEmbedding emb2(sim2->model(), copied.surface.vertices, copied.surface.triangles);
-  const auto out = cutting::apply_cut(copied, *sim2, emb2, {prism(Vec3(0.015, 0.03, 0.002), r, 0.01, 24), r * 0.9}, {});
+  EXPECT_FALSE(cutting::surface_indexed(copied));
+  sim::Simulator sim2(o.sim->model(), o.sim->options());
+  sim::SurfaceEmbedding emb2(sim2.model(), copied.surface.vertices, copied.surface.triangles);
+  const auto out = cutting::apply_cut(copied, sim2, emb2, {prism(Vec3(0.015, 0.03, 0.002), r, 0.01, 24), r * 0.9}, {});
   ASSERT_EQ(out.status, "ok") << out.reason;
   EXPECT_TRUE(cutting::surface_indexed(copied));
   EXPECT_EQ(o.cut.surface.vertices, before.vertices);

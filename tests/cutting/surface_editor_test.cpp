@@ -243,10 +243,10 @@ TEST(SurfaceCutInPlace, PunchesEditSInPlaceAndRollBack) {
   expect_grid_matches(grid, s, rng, "rolled back");
 }
 
-TEST(SurfaceCutInPlace, CostDoesNotDependOnFarAwayParts) {
+TEST(SurfaceCutInPlace, FarAwayPartsStayUntouched) {
   // The same punch into the cube alone and into the cube with 30 far-away copies of itself: the same patch, the
-  // same edit (relative to the cube's triangles), the same volume. (Timing is for the benchmarks; here, the work
-  // is shown to be local: the far copies are never written.)
+  // same edit (relative to the cube's triangles), the same volume, and the copies never written. (The time is for
+  // the benchmarks: bench_surface_cut's padded mesh.)
   const double e = 0.01;
   const TriMesh one = test::grid_cube(8, e);
   TriMesh many = one;

@@ -5,6 +5,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "octocut/sim/surface.hpp"
@@ -80,6 +81,9 @@ class SurfaceEditor {
   /// Removes triangle f by moving the last triangle into its place. Returns the old index of the triangle that
   /// moved to f, or -1 when f was the last.
   int32_t remove_face(int32_t f);
+  /// Removes the triangles `ascending` (indices, ascending, no duplicates), from the last down: the triangle that
+  /// moves into a removed one's place is then always one that stays.
+  void remove_faces(std::span<const int32_t> ascending);
 
   /// A point in the journal to roll back to.
   [[nodiscard]] std::size_t mark() const { return m_journal.size(); }

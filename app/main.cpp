@@ -8,15 +8,16 @@
 #include <string>
 #include <vector>
 
-#include "assets.hpp"
-#include "octocut/engine/bench.hpp"
-#include "octocut/engine/bench_baseline.hpp"
-#include "octocut/engine/cut_command.hpp"
-#include "octocut/engine/expected.hpp"
-#include "octocut/engine/io.hpp"
-#include "octocut/engine/scene_loader.hpp"
-#include "octocut/engine/tool.hpp"
-#include "octocut/engine/world.hpp"
+#include "octocut/engine/assets/procedural_meshes.hpp"
+#include "octocut/engine/bench/bench.hpp"
+#include "octocut/engine/bench/bench_baseline.hpp"
+#include "octocut/engine/run/cut_command.hpp"
+#include "octocut/engine/scene/expected.hpp"
+#include "octocut/engine/io/io.hpp"
+#include "octocut/engine/scene/scene_loader.hpp"
+#include "octocut/engine/run/tool.hpp"
+#include "octocut/engine/run/run.hpp"
+#include "octocut/engine/run/scene_object.hpp"
 
 namespace {
 
@@ -72,9 +73,9 @@ int cmd_run(const std::string& scene_path, const std::vector<std::string>& sets,
   const engine::RunResult r = engine::run_scene(scene, o);
   if (r.exit_code != 0) {
     std::fprintf(stderr, "octocut: %s\n", r.error.c_str());
-    if (r.exit_code == 1) std::fprintf(stderr, "octocut: report written to %s\n", r.report_path.c_str());
+    if (r.report_written) std::fprintf(stderr, "octocut: report written to %s\n", r.report_path.c_str());
     // A failed run's report is still checked (its failures are worth seeing), but never becomes the reference.
-    if (r.exit_code == 1 && expected == ExpectedMode::check) check_report(scene, r.report_path);
+    if (r.report_written && expected == ExpectedMode::check) check_report(scene, r.report_path);
     if (r.exit_code == 1 && expected == ExpectedMode::regenerate) {
       std::fprintf(stderr, "octocut: not regenerating the expected block from a failed run\n");
     }
@@ -100,6 +101,7 @@ int cmd_validate(const std::string& scene_path, const std::vector<std::string>& 
                 "%zu cuts\n",
                 t.name.c_str(), t.blade.c_str(), t.blade_vertices, t.blade_triangles, t.blade_volume_m3,
                 t.mesh_triangles, t.keyframes, t.cuts);
+    for (const std::string& w : t.warnings) std::printf("warning: %s\n", w.c_str());
   }
   for (const std::string& w : o.warnings) std::printf("warning: %s\n", w.c_str());
   return 0;
@@ -107,9 +109,9 @@ int cmd_validate(const std::string& scene_path, const std::vector<std::string>& 
 
 int cmd_assets(const std::string& dir) {
   // Regenerate every procedural mesh and list what was written.
-  const std::vector<app::AssetInfo> infos = app::write_assets(dir);
+  const std::vector<engine::AssetInfo> infos = engine::write_assets(dir);
   std::printf("%-20s %9s %9s %14s\n", "file", "vertices", "triangles", "volume_mm3");
-  for (const app::AssetInfo& a : infos) {
+  for (const engine::AssetInfo& a : infos) {
     std::printf("%-20s %9zu %9zu %14.3f\n", a.file.c_str(), a.vertices, a.triangles, a.volume_mm3);
   }
   std::printf("wrote %zu meshes (mm) to %s\n", infos.size(), dir.c_str());

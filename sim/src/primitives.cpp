@@ -4,10 +4,15 @@
 #include <array>
 #include <cmath>
 #include <map>
+#include <numbers>
+#include <stdexcept>
 
 namespace octocut::sim {
 
-TriMesh closed_box_grid(const Box3& b, int cells) {
+namespace {
+
+// The grid of closed_box_grid; `welded`: faces share the vertices along the box's edges.
+TriMesh box_grid(const Box3& b, int cells, bool welded) {
   const Vec3 size = b.max - b.min;
   std::array<int, 3> n{};
   for (int a = 0; a < 3; ++a) n[std::size_t(a)] = std::max(1, int(std::lround(cells * size[a] / size.maxCoeff())));
@@ -18,6 +23,10 @@ TriMesh closed_box_grid(const Box3& b, int cells) {
   TriMesh m;
   std::map<std::array<int, 3>, int32_t> index;  // grid node -> vertex
   auto vertex = [&](std::array<int, 3> g) {
+    if (!welded) {
+      m.vertices.emplace_back(coord(0, g[0]), coord(1, g[1]), coord(2, g[2]));
+      return int32_t(m.vertices.size() - 1);
+    }
     auto [it, fresh] = index.emplace(g, int32_t(m.vertices.size()));
     if (fresh) m.vertices.emplace_back(coord(0, g[0]), coord(1, g[1]), coord(2, g[2]));
     return it->second;
@@ -43,6 +52,44 @@ TriMesh closed_box_grid(const Box3& b, int cells) {
     }
   }
   return m;
+}
+
+}  // namespace
+
+TriMesh closed_box_grid(const Box3& b, int cells) { return box_grid(b, cells, true); }
+
+TriMesh box_face_grids(const Box3& b, int cells) {
+  const Vec3 size = b.max - b.min;
+  if (!(size.minCoeff() > 0.0) || !size.allFinite()) throw std::invalid_argument("box_face_grids: empty box");
+  return box_grid(b, std::max(1, cells), false);
+}
+
+TriMesh cylinder_mesh(double radius, double height, int segments) {
+  if (!(std::isfinite(radius) && radius > 0.0)) throw std::invalid_argument("cylinder_mesh: radius must be > 0");
+  if (!(std::isfinite(height) && height > 0.0)) throw std::invalid_argument("cylinder_mesh: height must be > 0");
+  if (segments < 3) throw std::invalid_argument("cylinder_mesh: segments must be >= 3");
+  // Vertices: the bottom ring (0..n-1), the top ring (n..2n-1), the bottom centre (2n), the top centre (2n+1).
+  TriMesh mesh;
+  const int n = segments;
+  const double z0 = -0.5 * height, z1 = 0.5 * height;
+  for (const double z : {z0, z1}) {
+    for (int k = 0; k < n; ++k) {
+      const double phi = 2.0 * std::numbers::pi * k / n;
+      mesh.vertices.emplace_back(radius * std::cos(phi), radius * std::sin(phi), z);
+    }
+  }
+  mesh.vertices.emplace_back(0.0, 0.0, z0);
+  mesh.vertices.emplace_back(0.0, 0.0, z1);
+  const int bottom = 2 * n, top = 2 * n + 1;
+  // Triangles, counter-clockwise seen from outside: side quads as two triangles, and a fan on each cap.
+  for (int k = 0; k < n; ++k) {
+    const int k1 = (k + 1) % n;
+    mesh.triangles.push_back({k, k1, n + k1});
+    mesh.triangles.push_back({k, n + k1, n + k});
+    mesh.triangles.push_back({bottom, k1, k});
+    mesh.triangles.push_back({top, n + k, n + k1});
+  }
+  return mesh;
 }
 
 // A conforming tet mesh of a box at about `cell` (m): a grid of cubes, each split into 6 tets around its main

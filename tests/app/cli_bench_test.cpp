@@ -7,7 +7,8 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
-#include "cli_util.hpp"
+#include "common/cli_util.hpp"
+#include "common/temp_dir.hpp"
 
 namespace octocut {
 namespace {
@@ -17,14 +18,8 @@ using json = nlohmann::ordered_json;
 using test::CommandResult;
 using test::run_octocut;
 
-struct BenchCli : ::testing::Test {
-  fs::path dir;
-  void SetUp() override {
-    dir = fs::temp_directory_path() / ("octocut_cli_bench_" + std::to_string(::getpid()));
-    fs::remove_all(dir);
-    fs::create_directories(dir);
-  }
-  void TearDown() override { fs::remove_all(dir); }
+struct BenchCli : test::TempDirTest {
+  const fs::path& dir = m_dir;
   std::string p(const std::string& name) const { return "'" + (dir / name).string() + "'"; }
   json read(const std::string& name) const {
     std::ifstream in(dir / name);

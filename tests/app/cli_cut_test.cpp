@@ -8,11 +8,12 @@
 #include <nlohmann/json.hpp>
 #include <numbers>
 
-#include "../common/shapes.hpp"
-#include "cli_util.hpp"
-#include "octocut/engine/mesh_io.hpp"
+#include "common/shapes.hpp"
+#include "common/cli_util.hpp"
+#include "octocut/engine/io/mesh_io.hpp"
 #include "octocut/sim/primitives.hpp"
 #include "octocut/sim/surface_check.hpp"
+#include "common/temp_dir.hpp"
 
 namespace octocut {
 namespace {
@@ -22,20 +23,17 @@ using sim::Vec3;
 
 sim::TriMesh prism(const Vec3& c, double r, double h, int n) { return test::prism_mesh(c, r, h, n); }
 
-struct CutCli : ::testing::Test {
-  fs::path dir;
+struct CutCli : test::TempDirTest {
+  const fs::path& dir = m_dir;
   void SetUp() override {
-    dir = fs::temp_directory_path() / ("octocut_cli_cut_" + std::to_string(::getpid()));
-    fs::remove_all(dir);
-    fs::create_directories(dir);
+    TempDirTest::SetUp();
     // A 20 mm cube in millimetres, gridded, and a 2 mm-radius, 32-gon punch through it.
     engine::save_mesh(dir / "cube.off", sim::closed_box_grid({Vec3(0, 0, 0), Vec3(20, 20, 20)}, 10));
     engine::save_mesh(dir / "punch.off", prism(Vec3(10, 10, 10), 2.0, 30.0, 32));
   }
-  void TearDown() override { fs::remove_all(dir); }
-  std::string p(const std::string& name) const { return "'" + (dir / name).string() + "'"; }
+  std::string p(const std::string& name) const { return "'" + (m_dir / name).string() + "'"; }
   nlohmann::json report(const std::string& name) const {
-    std::ifstream in(dir / name);
+    std::ifstream in(m_dir / name);
     return nlohmann::json::parse(in);
   }
 };

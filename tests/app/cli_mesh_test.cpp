@@ -10,8 +10,9 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "cli_util.hpp"
-#include "octocut/engine/mesh_io.hpp"
+#include "common/cli_util.hpp"
+#include "octocut/engine/io/mesh_io.hpp"
+#include "common/temp_dir.hpp"
 
 namespace {
 
@@ -35,23 +36,15 @@ std::string cube_obj(bool flip) {
   return s;
 }
 
-class CliMeshTest : public ::testing::Test {
+class CliMeshTest : public octocut::test::TempDirTest {
  protected:
   void SetUp() override {
-    const std::string test = ::testing::UnitTest::GetInstance()->current_test_info()->name();
-    m_dir = fs::temp_directory_path() / ("octocut_mesh_test_" + std::to_string(::getpid()) + "_" + test);
-    fs::remove_all(m_dir);
-    fs::create_directories(m_dir);
+    TempDirTest::SetUp();
     ::setenv("OCTOCUT_CACHE_DIR", (m_dir / "cache").c_str(), 1);
   }
   void TearDown() override {
     ::unsetenv("OCTOCUT_CACHE_DIR");
-    fs::remove_all(m_dir);
-  }
-  fs::path write(const std::string& name, const std::string& text) {
-    const fs::path p = m_dir / name;
-    std::ofstream(p) << text;
-    return p;
+    TempDirTest::TearDown();
   }
   // A scene on surface file `mesh` (mm), clamped at z < 1.5 mm (the whole bottom layer of leaves: root 10.5 mm at
   // level 3 puts the first node layer above z = 0 at 1.06 mm).
@@ -74,7 +67,6 @@ class CliMeshTest : public ::testing::Test {
   CommandResult run(const fs::path& scene_file) {
     return run_octocut("run '" + scene_file.string() + "' --out '" + (m_dir / "out").string() + "' --quiet");
   }
-  fs::path m_dir;
 };
 
 TEST_F(CliMeshTest, MeshSurfaceRunsEndToEndAndTheCacheIsUsed) {

@@ -13,7 +13,8 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "cli_util.hpp"
+#include "common/cli_util.hpp"
+#include "common/temp_dir.hpp"
 #include <thread>
 
 namespace {
@@ -29,21 +30,8 @@ json read_json(const fs::path& p) {
   return json::parse(in);
 }
 
-class CliRunTest : public ::testing::Test {
+class CliRunTest : public octocut::test::TempDirTest {
  protected:
-  void SetUp() override {
-    const std::string test = ::testing::UnitTest::GetInstance()->current_test_info()->name();
-    m_dir = fs::temp_directory_path() / ("octocut_run_test_" + std::to_string(::getpid()) + "_" + test);
-    fs::remove_all(m_dir);
-    fs::create_directories(m_dir);
-  }
-  void TearDown() override { fs::remove_all(m_dir); }
-  fs::path write(const std::string& name, const std::string& text) {
-    const fs::path p = m_dir / name;
-    std::ofstream(p) << text;
-    return p;
-  }
-  fs::path m_dir;
 };
 
 const char* kCube = R"({

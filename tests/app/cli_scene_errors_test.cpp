@@ -9,7 +9,8 @@
 #include <fstream>
 #include <string>
 
-#include "cli_util.hpp"
+#include "common/cli_util.hpp"
+#include "common/temp_dir.hpp"
 
 namespace {
 
@@ -19,16 +20,8 @@ using octocut::test::CommandResult;
 using octocut::test::run_octocut;
 
 /// Gives each test a fresh directory for its scene files, removed afterwards.
-class CliSceneErrorsTest : public ::testing::Test {
+class CliSceneErrorsTest : public octocut::test::TempDirTest {
  protected:
-  void SetUp() override {
-    const std::string test = ::testing::UnitTest::GetInstance()->current_test_info()->name();
-    m_dir = fs::temp_directory_path() / ("octocut_cli_test_" + std::to_string(::getpid()) + "_" + test);
-    fs::remove_all(m_dir);
-    fs::create_directories(m_dir);
-  }
-
-  void TearDown() override { fs::remove_all(m_dir); }
 
   /// Writes `text` to `name` in the test directory and returns the path.
   std::string write(const std::string& name, const std::string& text) const {
@@ -40,7 +33,6 @@ class CliSceneErrorsTest : public ::testing::Test {
   /// Runs `octocut validate` on `path`.
   static CommandResult validate(const std::string& path) { return run_octocut("validate '" + path + "'"); }
 
-  fs::path m_dir;
 };
 
 TEST_F(CliSceneErrorsTest, ValidBoxSceneExitsZero) {

@@ -9,7 +9,7 @@
 #include <string>
 
 #include "octocut/cutting/surface_cut.hpp"
-#include "octocut/engine/mesh_io.hpp"
+#include "octocut/engine/io/mesh_io.hpp"
 
 namespace {
 

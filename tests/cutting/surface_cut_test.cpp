@@ -17,7 +17,7 @@
 #include <utility>
 
 #include "octocut/cutting/mesh_check.hpp"
-#include "octocut/engine/mesh_io.hpp"
+#include "octocut/engine/io/mesh_io.hpp"
 #include "octocut/sim/surface.hpp"
 #include "../common/shapes.hpp"
 #include "test_meshes.hpp"

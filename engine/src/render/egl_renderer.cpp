@@ -15,7 +15,7 @@
 #include <string>
 #include <vector>
 
-#include "octocut/engine/renderer.hpp"
+#include "octocut/engine/render/renderer.hpp"
 
 namespace octocut::engine {
 

@@ -1,6 +1,6 @@
 // The null renderer: builds without EGL (OCTOCUT_WITH_EGL=OFF, or EGL/epoxy not found) link this instead of the EGL
 // renderer, so that every run that asks for rendering ends in a clear error rather than a link failure.
-#include "octocut/engine/renderer.hpp"
+#include "octocut/engine/render/renderer.hpp"
 
 namespace octocut::engine {
 

@@ -1,10 +1,12 @@
-#include "octocut/engine/render_builder.hpp"
+#include "octocut/engine/render/render_builder.hpp"
 
 #include <algorithm>
 #include <cmath>
-#include <numbers>
 #include <stdexcept>
 #include <string>
+
+#include "octocut/engine/run/tool.hpp"
+#include "octocut/sim/pose.hpp"
 
 namespace octocut::engine {
 
@@ -12,29 +14,10 @@ namespace {
 
 Eigen::Vector3f to_float(const sim::Vec3& v) { return v.cast<float>(); }
 
-// Rotation of XYZ Euler angles in degrees: first about x, then y, then z (fixed axes), as for handles.
-Eigen::Quaterniond euler_xyz(const std::array<double, 3>& deg) {
-  const double k = std::numbers::pi / 180.0;
-  return Eigen::AngleAxisd(deg[2] * k, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(deg[1] * k, Eigen::Vector3d::UnitY()) *
-         Eigen::AngleAxisd(deg[0] * k, Eigen::Vector3d::UnitX());
-}
-
 }  // namespace
 
 Eigen::Matrix4d prop_pose(const RenderProp& prop, double t) {
-  Eigen::Matrix4d pose = Eigen::Matrix4d::Identity();
-  const auto& keys = prop.keyframes;
-  if (keys.empty()) return pose;
-  // The keyframe interval holding t, and the fraction s along it; held at the ends.
-  std::size_t i = 0;
-  while (i + 1 < keys.size() && t > keys[i + 1].t) ++i;
-  const PropKeyframe& a = keys[i];
-  const PropKeyframe& b = i + 1 < keys.size() ? keys[i + 1] : keys[i];
-  const double s = (b.t > a.t) ? std::clamp((t - a.t) / (b.t - a.t), 0.0, 1.0) : 0.0;
-  const Eigen::Vector3d pa(a.position[0], a.position[1], a.position[2]), pb(b.position[0], b.position[1], b.position[2]);
-  pose.topLeftCorner<3, 3>() = euler_xyz(a.rotation_deg).slerp(s, euler_xyz(b.rotation_deg)).toRotationMatrix();
-  pose.topRightCorner<3, 1>() = (1.0 - s) * pa + s * pb;
-  return pose;
+  return sim::interpolate_pose(pose_keyframes(prop.keyframes), t).matrix();
 }
 
 RenderMesh prop_mesh(const sim::TriMesh& mesh, const std::string& material) {
@@ -45,44 +28,6 @@ RenderMesh prop_mesh(const sim::TriMesh& mesh, const std::string& material) {
   out.triangles = mesh.triangles;
   out.normals = mesh_normals(out.positions, out.triangles);
   return out;
-}
-
-sim::TriMesh box_surface(const sim::Box3& box, int cells) {
-  const sim::Vec3 size = box.max - box.min;
-  const double longest = size.maxCoeff();
-  if (!(longest > 0.0) || size.minCoeff() <= 0.0) throw std::invalid_argument("box_surface: empty box");
-  std::array<int, 3> n{};
-  for (int a = 0; a < 3; ++a) n[a] = std::max(1, int(std::lround(std::max(1, cells) * size[a] / longest)));
-
-  sim::TriMesh mesh;
-  // Each face: the normal axis a and side, spanned by the two other axes (u, v) ordered so that u × v points out.
-  for (int a = 0; a < 3; ++a) {
-    for (int side = 0; side < 2; ++side) {
-      int u = (a + 1) % 3, v = (a + 2) % 3;
-      if (side == 0) std::swap(u, v);
-      const int first = int(mesh.vertices.size());
-      // Grid vertices.
-      for (int j = 0; j <= n[v]; ++j) {
-        for (int i = 0; i <= n[u]; ++i) {
-          sim::Vec3 p;
-          p[a] = side ? box.max[a] : box.min[a];
-          p[u] = box.min[u] + size[u] * double(i) / n[u];
-          p[v] = box.min[v] + size[v] * double(j) / n[v];
-          mesh.vertices.push_back(p);
-        }
-      }
-      // Two triangles per grid cell.
-      const int row = n[u] + 1;
-      for (int j = 0; j < n[v]; ++j) {
-        for (int i = 0; i < n[u]; ++i) {
-          const int p00 = first + j * row + i, p10 = p00 + 1, p01 = p00 + row, p11 = p01 + 1;
-          mesh.triangles.push_back({p00, p10, p11});
-          mesh.triangles.push_back({p00, p11, p01});
-        }
-      }
-    }
-  }
-  return mesh;
 }
 
 EmbeddedSurface embed_surface(const sim::ObjectModel& model, sim::TriMesh rest) {

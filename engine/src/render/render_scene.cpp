@@ -1,7 +1,7 @@
 // GL-free helpers of the render scene.
 #include <Eigen/Geometry>
 
-#include "octocut/engine/render_scene.hpp"
+#include "octocut/engine/render/render_scene.hpp"
 
 namespace octocut::engine {
 

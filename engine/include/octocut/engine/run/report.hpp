@@ -1,0 +1,86 @@
+#pragma once
+// The run report (SPEC §8), as plain data, and its JSON text (schema octocut.report/1).
+#include <array>
+#include <string>
+#include <vector>
+
+namespace octocut::engine {
+
+/// This build's version (the project's VERSION), written into every report as `octocut_version`.
+const char* version();
+
+/// Median, 95th percentile and maximum of a list of durations, ms.
+struct TimingSummary {
+  double median = 0.0, p95 = 0.0, max = 0.0;
+  static TimingSummary of(std::vector<double> samples_ms);
+};
+
+/// Names of the timed parts of a cut in CutSummary::ms: the stages of SPEC §4, then the total.
+inline constexpr std::array<const char*, 8> kCutStageKeys = {
+    "back_transform", "surface", "material_graph", "refine", "node_split", "embedding", "solver_update", "total"};
+
+/// One cut event of a run (the report's `cuts[]`, SPEC §8).
+struct CutSummary {
+  double t = 0.0;                  ///< time of the cut, s
+  std::string tool;                ///< the tool's name
+  std::string status;              ///< "ok" | "skipped" | "no-op"
+  std::string reason;              ///< why skipped or no-op; empty when ok
+  bool scheduled = true;           ///< on the scene's timeline (false: World::cut_now)
+  int components = 0;              ///< material components the blade touched
+  int restricted_components = 0;   ///< of those, the ones whose rest-space blade left other material alone
+  int unrestricted_components = 0; ///< of those, the ones whose restriction could not close up and was dropped
+  double removed_volume_m3 = 0.0;  ///< V(S) - V(S') of the boolean, m^3
+  int tets_removed = 0;            ///< tets of M removed
+  int leaves_refined = 0;          ///< refine operations
+  int fragments_removed = 0;       ///< loose pieces removed
+  double fragment_volume_m3 = 0.0; ///< their material volume, m^3
+  long elements_after = 0, dofs_after = 0, surface_vertices_after = 0;
+  std::array<double, 8> ms{};      ///< per kCutStageKeys, ms
+};
+
+struct ProbeResult {
+  std::string name;
+  std::array<double, 3> rest{};          ///< m
+  std::array<double, 3> displacement{};  ///< m
+};
+
+/// What a run built (the report's `subsystems`): each part is built only when the scene uses it.
+struct Subsystems {
+  bool renderer = false;                 ///< a GL renderer was started (render.enabled, no --no-render)
+  bool frame_writer = false;             ///< frames were written (output.frames with a renderer)
+  bool cut_index = false;                ///< the face grid over S that cuts use (a tool cut, or has cut events)
+  bool contact = false;                  ///< a rigid-body contact world (not built yet in this version)
+  std::string material_graph = "box";    ///< "box" | "cache" | "meshed": where M came from
+};
+
+struct Report {
+  std::string status = "ok";  ///< "ok" | "failed"
+  std::string error;
+  std::string scene;
+  std::string name;
+  long steps = 0;
+  double sim_time_s = 0.0;
+  double wall_time_s = 0.0;
+  TimingSummary step_ms, render_ms, frame_write_ms;
+  long frames_rendered = 0;  ///< frames the renderer drew
+  long frames = 0;           ///< frames written to frames/ (PNG)
+  long elements = 0, dofs = 0, hanging_slots = 0, tets = 0, surface_vertices = 0, surface_triangles = 0;
+  Subsystems subsystems;
+  std::vector<CutSummary> cuts;
+  std::vector<ProbeResult> probes;
+  bool finite = true;
+  long recoveries = 0, failed_steps = 0, solver_failures = 0, nonfinite = 0, speed_limit = 0, newton_unconverged = 0;
+  double max_speed_m_s = 0.0;
+  double kinetic_j = 0.0, elastic_j = 0.0;
+  bool surface_closed = true, surface_self_intersecting = false;
+  double rest_volume_m3 = 0.0;
+  long surface_components = 0;
+  long surface_genus = 0;      ///< sum over the components of S of their genus (through-holes)
+  bool object_removed = false; ///< every element was cut away
+  std::vector<std::string> warnings;
+};
+
+/// The report as pretty-printed JSON; numbers are written with round-trip precision, so equal runs give equal text.
+std::string report_json(const Report& report);
+
+}  // namespace octocut::engine

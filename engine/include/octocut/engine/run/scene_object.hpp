@@ -1,0 +1,60 @@
+#pragma once
+// What a scene's inputs build before anything runs: the deformable object (model, rest surface S, material graph M),
+// the render props' meshes, the simulator options, the number of steps. Bad input throws SceneError here, before
+// any output is touched.
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "octocut/engine/scene/scene.hpp"
+#include "octocut/sim/material_graph.hpp"
+#include "octocut/sim/object.hpp"
+#include "octocut/sim/simulator.hpp"
+#include "octocut/sim/surface.hpp"
+
+namespace octocut::engine {
+
+/// Most steps one run may take (duration / dt); more is bad input, not a run that never ends.
+inline constexpr long kMaxSteps = 1'000'000'000;
+
+/// Number of steps of a scene's timeline, ceil(duration / dt). Throws SceneError past kMaxSteps.
+long step_count(const Scene& scene);
+
+/// Where a scene's material graph M came from (the report's `subsystems.material_graph`).
+enum class MaterialGraphSource {
+  box,     ///< a box primitive: its exact material, or a Kuhn tet grid of it when tools cut it (no mesher)
+  cache,   ///< a mesh surface whose M was read from the disk cache (no mesher call)
+  meshed,  ///< a mesh surface meshed by CGAL Mesh_3 in this run
+};
+
+/// The report's name of a MaterialGraphSource: "box", "cache" or "meshed".
+const char* to_string(MaterialGraphSource source);
+
+/// A scene's deformable object: its model, its rest surface S and, for mesh surfaces, its material graph M.
+struct SceneObject {
+  sim::ObjectModel model;
+  sim::TriMesh surface;                                ///< rest surface S, m; a box primitive's is its 12 triangles
+  std::shared_ptr<const sim::MaterialGraph> graph;     ///< M; null for a box primitive that no tool cuts
+  MaterialGraphSource graph_source = MaterialGraphSource::box;
+  double graph_ms = 0.0;                               ///< time to obtain M, ms
+  std::vector<std::string> warnings;                   ///< from loading the mesh and the cache
+};
+
+/// True when some tool of the scene has cut events on its timeline.
+bool scene_cuts(const Scene& scene);
+
+/// Builds the object of a scene. A mesh surface is loaded (assimp), validated, scaled to metres, and meshed into M
+/// (CGAL Mesh_3, cached on disk); a box surface is an exact box material (a Kuhn tet grid when tools cut it). Then
+/// the octree: root given, or the bounding box of S made cubic and grown by 5%; base level, refine regions, handles.
+/// Throws SceneError naming the file and JSON pointer for inputs that only fail once built (a bad mesh file, a probe
+/// outside the material).
+SceneObject build_scene_object(const Scene& scene);
+
+/// Loads and validates the render props' meshes (`render.props`), scaled to metres, in order. Throws SceneError naming
+/// the file and `/render/props/<i>/mesh` for a bad mesh.
+std::vector<sim::TriMesh> load_render_props(const Scene& scene);
+
+/// The simulator options a scene asks for.
+sim::SimulatorOptions simulator_options(const Scene& scene);
+
+}  // namespace octocut::engine

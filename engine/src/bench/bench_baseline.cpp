@@ -1,0 +1,265 @@
+#include "octocut/engine/bench/bench_baseline.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <stdexcept>
+
+#include "octocut/engine/run/world.hpp"
+#include "scene/scene_schema.hpp"
+
+namespace octocut::engine {
+
+namespace {
+
+using json = nlohmann::ordered_json;
+using schema::join_pointer;
+
+constexpr const char* kSchema = "octocut.cut_baseline/1";
+constexpr double kMaxTolerance = 10.0;
+constexpr double kMaxSlackMs = 1000.0;
+
+[[noreturn]] void bad(const std::string& file, const std::string& pointer, const std::string& what) {
+  throw std::invalid_argument(file + ": " + (pointer.empty() ? std::string("/") : pointer) + ": " + what);
+}
+
+const json& member(const json& object, const char* key, const std::string& file, const std::string& at) {
+  const auto it = object.find(key);
+  if (it == object.end()) bad(file, at, std::string("missing key '") + key + "'");
+  return *it;
+}
+
+void only_keys(const json& object, std::initializer_list<const char*> keys, const std::string& file,
+               const std::string& at) {
+  for (const auto& [k, v] : object.items()) {
+    bool known = false;
+    for (const char* key : keys) known = known || k == key;
+    if (!known) bad(file, join_pointer(at, k), "unknown key");
+  }
+}
+
+double number(const json& value, const std::string& file, const std::string& at, double lo, double hi,
+              bool lo_open) {
+  if (!value.is_number()) bad(file, at, "expected a number");
+  const double x = value.get<double>();
+  if (!std::isfinite(x)) bad(file, at, "not finite");
+  if ((lo_open ? x <= lo : x < lo) || x > hi) {
+    char range[96];
+    std::snprintf(range, sizeof range, "out of range: %g (allowed %s%g, %g])", x, lo_open ? "(" : "[", lo, hi);
+    bad(file, at, range);
+  }
+  return x;
+}
+
+bool is_stage(const std::string& s) {
+  for (const char* k : kCutStageKeys)
+    if (s == k) return true;
+  return false;
+}
+
+// The bench document's calibration, ms.
+double calibration_of(const json& bench) {
+  const auto m = bench.find("machine");
+  if (m == bench.end() || !m->is_object() || !m->contains("calibration_ms") || !(*m)["calibration_ms"].is_number())
+    throw std::invalid_argument("the benchmark results carry no machine/calibration_ms");
+  const double c = (*m)["calibration_ms"].get<double>();
+  if (!std::isfinite(c) || c <= 0.0) throw std::invalid_argument("the benchmark results' calibration_ms is not positive");
+  return c;
+}
+
+json parse_bench(const std::string& bench_json) {
+  try {
+    return json::parse(bench_json);
+  } catch (const json::parse_error& e) {
+    throw std::invalid_argument(std::string("benchmark results are not JSON: ") + e.what());
+  }
+}
+
+}  // namespace
+
+CutBaseline parse_cut_baseline(const std::string& text, const std::string& file) {
+  json doc;
+  try {
+    doc = json::parse(text);
+  } catch (const json::parse_error& e) {
+    throw std::invalid_argument(file + ": not JSON: " + e.what());
+  }
+  if (!doc.is_object()) bad(file, "", "expected an object");
+  only_keys(doc, {"schema", "machine", "tolerance", "slack_ms", "benchmarks"}, file, "");
+  const json& schema_value = member(doc, "schema", file, "");
+  if (!schema_value.is_string() || schema_value.get<std::string>() != kSchema)
+    bad(file, "/schema", std::string("expected \"") + kSchema + "\"");
+
+  CutBaseline b;
+  const json& machine = member(doc, "machine", file, "");
+  if (!machine.is_object()) bad(file, "/machine", "expected an object");
+  only_keys(machine, {"cpu", "threads", "calibration_ms"}, file, "/machine");
+  if (machine.contains("cpu")) {
+    if (!machine["cpu"].is_string()) bad(file, "/machine/cpu", "expected a string");
+    b.cpu = machine["cpu"].get<std::string>();
+  }
+  if (machine.contains("threads")) number(machine["threads"], file, "/machine/threads", 0, 1e6, false);
+  b.calibration_ms =
+      number(member(machine, "calibration_ms", file, "/machine"), file, "/machine/calibration_ms", 0.0, 1e6, true);
+  b.tolerance = number(member(doc, "tolerance", file, ""), file, "/tolerance", 0.0, kMaxTolerance, false);
+  b.slack_ms = number(member(doc, "slack_ms", file, ""), file, "/slack_ms", 0.0, kMaxSlackMs, false);
+
+  const json& list = member(doc, "benchmarks", file, "");
+  if (!list.is_array()) bad(file, "/benchmarks", "expected an array");
+  if (list.empty()) bad(file, "/benchmarks", "no benchmark to compare");
+  std::set<std::string> names;
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const std::string at = join_pointer("/benchmarks", i);
+    const json& e = list[i];
+    if (!e.is_object()) bad(file, at, "expected an object");
+    only_keys(e, {"name", "cuts_ok", "ms"}, file, at);
+    CutBaseline::Benchmark bm;
+    const json& name = member(e, "name", file, at);
+    if (!name.is_string() || !name.get<std::string>().starts_with("cut/"))
+      bad(file, at + "/name", "expected the name of a cut benchmark (\"cut/...\")");
+    bm.name = name.get<std::string>();
+    if (!names.insert(bm.name).second) bad(file, at + "/name", "benchmark '" + bm.name + "' listed twice");
+    const double ok = number(member(e, "cuts_ok", file, at), file, at + "/cuts_ok", 1.0, 1e9, false);
+    if (ok != std::floor(ok)) bad(file, at + "/cuts_ok", "expected an integer");
+    bm.cuts_ok = static_cast<long>(ok);
+    const json& ms = member(e, "ms", file, at);
+    if (!ms.is_object()) bad(file, at + "/ms", "expected an object");
+    if (ms.empty()) bad(file, at + "/ms", "no stage to compare");
+    for (const auto& [stage, value] : ms.items()) {
+      const std::string sat = join_pointer(at + "/ms", stage);
+      if (!is_stage(stage)) bad(file, sat, "unknown stage (expected one of SPEC §8 cuts[].ms)");
+      bm.stages.push_back({stage, number(value, file, sat, 0.0, 1e9, false)});
+    }
+    b.benchmarks.push_back(std::move(bm));
+  }
+  return b;
+}
+
+void check_baseline_allowances(double tolerance, double slack_ms) {
+  if (!(tolerance >= 0.0 && tolerance <= kMaxTolerance)) throw std::invalid_argument("--tolerance must lie in [0, 10]");
+  if (!(slack_ms >= 0.0 && slack_ms <= kMaxSlackMs)) throw std::invalid_argument("--slack-ms must lie in [0, 1000]");
+}
+
+std::string make_cut_baseline(const std::string& bench_json, double tolerance, double slack_ms) {
+  check_baseline_allowances(tolerance, slack_ms);
+  const json bench = parse_bench(bench_json);
+  const double calibration = calibration_of(bench);
+  json doc;
+  doc["schema"] = kSchema;
+  doc["machine"] = {{"cpu", bench["machine"].value("cpu", "unknown")},
+                    {"threads", bench["machine"].value("threads", 0)},
+                    {"calibration_ms", calibration}};
+  doc["tolerance"] = tolerance;
+  doc["slack_ms"] = slack_ms;
+  doc["benchmarks"] = json::array();
+  for (const json& b : bench.value("benchmarks", json::array())) {
+    const std::string name = b.value("name", "");
+    if (!name.starts_with("cut/")) continue;
+    const long ok = b.contains("params") ? b["params"].value("ok", 0L) : 0L;
+    if (ok < 1) throw std::invalid_argument(name + ": no ok cut to take a baseline from");
+    json ms = json::object();
+    for (const char* k : kCutStageKeys) {
+      const std::string key = std::string(k) + "_ms";
+      if (!b.contains("metrics") || !b["metrics"].contains(key) || !b["metrics"][key].is_number())
+        throw std::invalid_argument(name + ": the results lack metrics/" + key);
+      ms[k] = b["metrics"][key].get<double>();
+    }
+    doc["benchmarks"].push_back({{"name", name}, {"cuts_ok", ok}, {"ms", ms}});
+  }
+  if (doc["benchmarks"].empty()) throw std::invalid_argument("no cut benchmark ran: a baseline needs at least one");
+  return doc.dump(2) + "\n";
+}
+
+BaselineComparison compare_cut_baseline(const std::string& bench_json, const CutBaseline& baseline) {
+  const json bench = parse_bench(bench_json);
+  BaselineComparison out;
+  out.scale = calibration_of(bench) / baseline.calibration_ms;
+  for (const CutBaseline::Benchmark& bm : baseline.benchmarks) {
+    const json* run = nullptr;
+    if (bench.contains("benchmarks") && bench["benchmarks"].is_array())
+      for (const json& b : bench["benchmarks"])
+        if (b.is_object() && b.value("name", "") == bm.name) run = &b;
+    if (run == nullptr) {
+      out.notes.push_back(bm.name + ": not run, not compared");
+      continue;
+    }
+    const long ok = run->contains("params") ? (*run)["params"].value("ok", 0L) : 0L;
+    if (ok != bm.cuts_ok) {
+      // Medians over other sets of cuts are not comparable.
+      out.problems.push_back(bm.name + ": " + std::to_string(ok) + " ok cuts, the baseline has " +
+                             std::to_string(bm.cuts_ok) + " (timings not compared)");
+      continue;
+    }
+    for (const CutBaseline::Stage& s : bm.stages) {
+      const std::string key = s.name + "_ms";
+      if (!run->contains("metrics") || !(*run)["metrics"].contains(key) || !(*run)["metrics"][key].is_number()) {
+        // A stage without a number (a NaN time is written as null) cannot pass.
+        out.problems.push_back(bm.name + ": " + s.name + " has no measured time");
+        continue;
+      }
+      BaselineRow row;
+      row.benchmark = bm.name;
+      row.stage = s.name;
+      row.baseline_ms = s.ms;
+      row.expected_ms = out.scale * s.ms;
+      row.limit_ms = out.scale * (s.ms * (1.0 + baseline.tolerance) + baseline.slack_ms);
+      row.measured_ms = (*run)["metrics"][key].get<double>();
+      // NaN never passes.
+      row.regressed = !(row.measured_ms <= row.limit_ms);
+      if (row.regressed) {
+        char line[256];
+        std::snprintf(line, sizeof line, "%s: %s took %.3f ms, above the limit of %.3f ms (baseline %.3f ms x %.3f)",
+                      bm.name.c_str(), s.name.c_str(), row.measured_ms, row.limit_ms, s.ms, out.scale);
+        out.problems.emplace_back(line);
+      }
+      out.rows.push_back(row);
+    }
+  }
+  return out;
+}
+
+std::string with_baseline_comparison(const std::string& bench_json, const BaselineComparison& c,
+                                     const std::string& file) {
+  json bench = parse_bench(bench_json);
+  json doc;
+  doc["file"] = file;
+  doc["status"] = c.ok() ? "ok" : "regressed";
+  doc["scale"] = c.scale;
+  doc["rows"] = json::array();
+  for (const BaselineRow& r : c.rows) {
+    doc["rows"].push_back({{"benchmark", r.benchmark},
+                           {"stage", r.stage},
+                           {"baseline_ms", r.baseline_ms},
+                           {"expected_ms", r.expected_ms},
+                           {"limit_ms", r.limit_ms},
+                           {"measured_ms", r.measured_ms},
+                           {"regressed", r.regressed}});
+  }
+  doc["problems"] = c.problems;
+  doc["notes"] = c.notes;
+  bench["baseline"] = std::move(doc);
+  return bench.dump(2) + "\n";
+}
+
+std::string baseline_comparison_table(const BaselineComparison& c) {
+  std::string out;
+  char line[256];
+  std::snprintf(line, sizeof line, "baseline comparison (calibration scale %.3f)\n", c.scale);
+  out += line;
+  std::snprintf(line, sizeof line, "%-24s %-15s %11s %11s %11s %11s\n", "benchmark", "stage", "baseline_ms",
+                "expected_ms", "limit_ms", "measured_ms");
+  out += line;
+  for (const BaselineRow& r : c.rows) {
+    std::snprintf(line, sizeof line, "%-24s %-15s %11.3f %11.3f %11.3f %11.3f%s\n", r.benchmark.c_str(),
+                  r.stage.c_str(), r.baseline_ms, r.expected_ms, r.limit_ms, r.measured_ms,
+                  r.regressed ? "  REGRESSED" : "");
+    out += line;
+  }
+  for (const std::string& n : c.notes) out += "note: " + n + "\n";
+  for (const std::string& p : c.problems) out += "regression: " + p + "\n";
+  out += c.ok() ? "no regression\n" : std::to_string(c.problems.size()) + " regression(s)\n";
+  return out;
+}
+
+}  // namespace octocut::engine

@@ -1,0 +1,95 @@
+#include "octocut/engine/run/report.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+namespace octocut::engine {
+
+const char* version() { return OCTOCUT_VERSION; }
+
+TimingSummary TimingSummary::of(std::vector<double> s) {
+  TimingSummary t;
+  if (s.empty()) return t;
+  std::sort(s.begin(), s.end());
+  auto at = [&](double q) { return s[std::min(s.size() - 1, std::size_t(std::floor(q * double(s.size() - 1) + 0.5)))]; };
+  t.median = at(0.5);
+  t.p95 = at(0.95);
+  t.max = s.back();
+  return t;
+}
+
+namespace {
+using ojson = nlohmann::ordered_json;
+ojson timing(const TimingSummary& t) { return {{"median", t.median}, {"p95", t.p95}, {"max", t.max}}; }
+// JSON has no NaN or infinity: non-finite numbers are written as null.
+ojson num(double v) { return std::isfinite(v) ? ojson(v) : ojson(nullptr); }
+ojson vec(const std::array<double, 3>& v) { return ojson::array({num(v[0]), num(v[1]), num(v[2])}); }
+}  // namespace
+
+std::string report_json(const Report& r) {
+  nlohmann::ordered_json j;
+  j["schema"] = "octocut.report/1";
+  j["octocut_version"] = version();
+  j["status"] = r.status;
+  j["error"] = r.error.empty() ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(r.error);
+  j["scene"] = r.scene;
+  j["name"] = r.name;
+  j["steps"] = r.steps;
+  j["sim_time_s"] = num(r.sim_time_s);
+  j["wall_time_s"] = r.wall_time_s;
+  j["timing_ms"] = {{"step", timing(r.step_ms)}, {"render", timing(r.render_ms)}, {"frame_write", timing(r.frame_write_ms)}};
+  j["frames"] = {{"rendered", r.frames_rendered}, {"written", r.frames}};
+  j["counts"] = {{"elements", r.elements},         {"dofs", r.dofs},
+                 {"hanging_slots", r.hanging_slots}, {"tets", r.tets},
+                 {"surface_vertices", r.surface_vertices}, {"surface_triangles", r.surface_triangles}};
+  j["subsystems"] = {{"renderer", r.subsystems.renderer},
+                     {"frame_writer", r.subsystems.frame_writer},
+                     {"cut_index", r.subsystems.cut_index},
+                     {"contact", r.subsystems.contact},
+                     {"material_graph", r.subsystems.material_graph}};
+  j["cuts"] = nlohmann::ordered_json::array();
+  for (const CutSummary& c : r.cuts) {
+    ojson ms = ojson::object();
+    for (std::size_t k = 0; k < c.ms.size(); ++k) ms[std::string(kCutStageKeys[k])] = c.ms[k];
+    j["cuts"].push_back({{"t", c.t},
+                         {"tool", c.tool},
+                         {"status", c.status},
+                         {"scheduled", c.scheduled},
+                         {"reason", c.reason.empty() ? ojson(nullptr) : ojson(c.reason)},
+                         {"components", c.components},
+                         {"restricted_components", c.restricted_components},
+                         {"unrestricted_components", c.unrestricted_components},
+                         {"removed_volume_m3", num(c.removed_volume_m3)},
+                         {"tets_removed", c.tets_removed},
+                         {"leaves_refined", c.leaves_refined},
+                         {"fragments_removed", c.fragments_removed},
+                         {"fragment_volume_m3", num(c.fragment_volume_m3)},
+                         {"elements_after", c.elements_after},
+                         {"dofs_after", c.dofs_after},
+                         {"surface_vertices_after", c.surface_vertices_after},
+                         {"ms", ms}});
+  }
+  nlohmann::ordered_json probes = nlohmann::ordered_json::object();
+  for (const ProbeResult& p : r.probes) probes[p.name] = {{"rest", vec(p.rest)}, {"displacement", vec(p.displacement)}};
+  j["probes"] = probes;
+  j["stability"] = {{"finite", r.finite},
+                    {"recoveries", r.recoveries},
+                    {"failed_steps", r.failed_steps},
+                    {"solver_failures", r.solver_failures},
+                    {"nonfinite", r.nonfinite},
+                    {"speed_limit", r.speed_limit},
+                    {"newton_unconverged", r.newton_unconverged},
+                    {"max_speed_m_s", num(r.max_speed_m_s)},
+                    {"energy_j", {{"kinetic", num(r.kinetic_j)}, {"elastic", num(r.elastic_j)}}}};
+  j["surface"] = {{"closed", r.surface_closed},
+                  {"self_intersecting", r.surface_self_intersecting},
+                  {"rest_volume_m3", num(r.rest_volume_m3)},
+                  {"components", r.surface_components},
+                  {"genus", r.surface_genus},
+                  {"object_removed", r.object_removed}};
+  j["warnings"] = r.warnings;
+  return j.dump(2) + "\n";
+}
+
+}  // namespace octocut::engine

@@ -1,0 +1,237 @@
+// `octocut run`: a thin loop over engine::World, plus the renderer, the frame writer, the surface files, the progress
+// line and the report file.
+#include <unistd.h>
+
+#include <atomic>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <optional>
+
+#include "octocut/engine/io/io.hpp"
+#include "octocut/engine/io/mesh_io.hpp"
+#include "octocut/engine/render/frame_writer.hpp"
+#include "octocut/engine/render/renderer.hpp"
+#include "octocut/engine/run/run.hpp"
+#include "octocut/engine/run/world.hpp"
+#include "octocut/engine/scene/scene_loader.hpp"
+#include "octocut/sim/timing.hpp"
+
+namespace octocut::engine {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// Set by SIGINT/SIGTERM: the run stops at the next step and still writes its report.
+std::atomic<bool> g_interrupted{false};
+extern "C" void on_signal(int) { g_interrupted = true; }
+
+// Installs the run's signal handlers for its lifetime and restores the previous ones.
+class SignalGuard {
+ public:
+  SignalGuard() {
+    g_interrupted = false;
+    m_int = std::signal(SIGINT, on_signal);
+    m_term = std::signal(SIGTERM, on_signal);
+  }
+  ~SignalGuard() {
+    std::signal(SIGINT, m_int);
+    std::signal(SIGTERM, m_term);
+  }
+  SignalGuard(const SignalGuard&) = delete;
+  SignalGuard& operator=(const SignalGuard&) = delete;
+
+ private:
+  void (*m_int)(int) = SIG_DFL;
+  void (*m_term)(int) = SIG_DFL;
+};
+
+// One run of `octocut run` over a built World: the outputs it writes and the timings it keeps.
+class Run {
+ public:
+  Run(World& world, const RunOptions& options, fs::path out) : m_world(world), m_options(options), m_out(std::move(out)) {}
+
+  // Starts the renderer when the world draws; an EGL failure is bad input (exit 2), with the report written.
+  void start_renderer() {
+    if (!m_world.renders()) return;
+    m_renderer = make_renderer();
+    m_subsystems.renderer = true;
+  }
+
+  // The whole timeline: the first frame at rest, then steps, frames, surfaces and the progress line.
+  void run() {
+    const Scene& scene = m_world.scene();
+    open_outputs();
+    if (m_renderer) render_frame();
+    const bool tty = m_options.progress && isatty(STDERR_FILENO);
+    auto last_progress = sim::Clock::now();
+    while (!m_world.done()) {
+      if (g_interrupted) throw std::runtime_error("interrupted by a signal");
+      const StepResult step = m_world.step();
+      const long i = m_world.steps();
+      if (scene.output.surface_every > 0 && i % scene.output.surface_every == 0) {
+        char name[32];
+        std::snprintf(name, sizeof(name), "surface_%06ld.ply", i);
+        write_file_atomic(m_out / "surfaces" / name, encode_ply_binary(m_world.deformed_surface()));
+      }
+      if (m_renderer && i % scene.render.every == 0) render_frame();
+      if (tty && (sim::ms_since(last_progress) > 200.0 || m_world.done())) {
+        last_progress = sim::Clock::now();
+        print_progress(step);
+      }
+    }
+    if (!state_finite(m_world.simulator().state())) throw std::runtime_error("the state is not finite");
+    if (scene.output.surface_final) {
+      write_file_atomic(m_out / "surface_final.ply", encode_ply_binary(m_world.deformed_surface()));
+      write_file_atomic(m_out / "surface_rest_final.ply", encode_ply_binary(m_world.rest_surface()));
+    }
+    // Every queued frame is on disk before the run counts as done.
+    if (m_writer) m_writer->finish();
+  }
+
+  // The world's report, with what the loop measured and wrote. A failed run keeps every frame written before.
+  Report finish(std::chrono::steady_clock::time_point wall0) {
+    if (m_writer) {
+      try {
+        m_writer->finish();
+      } catch (const std::exception&) {
+        // Already reported through the run's error.
+      }
+    }
+    Report report = m_world.report();
+    for (std::string& w : m_warnings) report.warnings.push_back(std::move(w));
+    if (m_writer) {
+      report.frame_write_ms = TimingSummary::of(m_writer->write_ms());
+      report.frames = m_writer->written();
+      m_writer.reset();
+    }
+    report.subsystems.renderer = m_subsystems.renderer;
+    report.subsystems.frame_writer = m_subsystems.frame_writer;
+    report.render_ms = TimingSummary::of(m_render_ms);
+    report.frames_rendered = long(m_render_ms.size());
+    report.wall_time_s = sim::ms_since(wall0) / 1000.0;
+    return report;
+  }
+
+ private:
+  // The files written before the first step: S at rest, the surfaces folder, the frame writer.
+  void open_outputs() {
+    const Scene& scene = m_world.scene();
+    if (scene.output.surface_final || scene.output.surface_every > 0)
+      write_file_atomic(m_out / "surface_rest.ply", encode_ply_binary(m_world.rest_surface()));
+    if (scene.output.surface_every > 0) fs::create_directories(m_out / "surfaces");
+    if (scene.output.frames && m_options.no_render)
+      m_warnings.push_back("/output/frames: --no-render given, no frames written");
+    if (scene.output.frames && !scene.render.enabled)
+      m_warnings.push_back("/output/frames: render.enabled is false, no frames written");
+    if (!m_renderer || !scene.output.frames) return;
+    const fs::path frames_dir = m_out / "frames";
+    std::error_code ec;
+    fs::create_directories(frames_dir, ec);
+    if (ec) throw std::runtime_error(frames_dir.string() + ": cannot create the frames directory: " + ec.message());
+    m_writer = std::make_unique<FrameWriter>(frames_dir, 4);
+    m_subsystems.frame_writer = true;
+  }
+
+  void render_frame() {
+    const auto t0 = sim::Clock::now();
+    Image image = m_renderer->render(m_world.render_scene());
+    m_render_ms.push_back(sim::ms_since(t0));
+    if (m_writer) m_writer->push(m_frame, std::move(image));
+    ++m_frame;
+  }
+
+  void print_progress(const StepResult& step) const {
+    std::fprintf(stderr, "\r[octocut] step %ld/%ld  t = %.4f s  %.2f ms/step", m_world.steps(), m_world.total_steps(),
+                 step.t, step.ms);
+    if (m_renderer) std::fprintf(stderr, "  frame %ld  %.1f ms/frame", m_frame, m_render_ms.back());
+    std::fprintf(stderr, "   ");
+    if (m_world.done()) std::fprintf(stderr, "\n");
+  }
+
+  World& m_world;
+  const RunOptions& m_options;
+  fs::path m_out;
+  std::unique_ptr<Renderer> m_renderer;
+  std::unique_ptr<FrameWriter> m_writer;
+  Subsystems m_subsystems;
+  std::vector<double> m_render_ms;
+  std::vector<std::string> m_warnings;
+  long m_frame = 0;
+};
+
+// Writes the report atomically; a failure to write it fails the run.
+void write_report(RunResult& result, const Report& report) {
+  try {
+    write_file_atomic(result.report_path, report_json(report));
+    result.report_written = true;
+  } catch (const std::exception& e) {
+    result.exit_code = 1;
+    result.error = result.error.empty() ? e.what() : result.error + "; " + e.what();
+  }
+}
+
+}  // namespace
+
+RunResult run_scene(const Scene& scene, const RunOptions& options) {
+  RunResult result;
+  const fs::path out(options.out_dir);
+  result.report_path = (out / "report.json").string();
+
+  // Everything that is bad input is found before the output directory is touched.
+  std::optional<World> world;
+  try {
+    world.emplace(scene, WorldOptions{!options.no_render});
+  } catch (const SceneError& e) {
+    result.exit_code = 2;
+    result.error = e.what();
+    return result;
+  }
+  std::error_code ec;
+  fs::create_directories(out, ec);
+  if (ec) {
+    result.exit_code = 1;
+    result.error = options.out_dir + ": cannot create the output directory: " + ec.message();
+    return result;
+  }
+
+  // The renderer starts only when asked for and not vetoed; if EGL cannot start, the run ends with exit 2 and the
+  // EGL error, with the report written.
+  const auto wall0 = sim::Clock::now();
+  Run run(*world, options, out);
+  try {
+    run.start_renderer();
+  } catch (const std::exception& e) {
+    result.exit_code = 2;
+    result.error = scene.file + ": /render/enabled: cannot start the renderer: " + e.what() +
+                   " (run with --no-render to skip rendering)";
+    Report report = run.finish(wall0);
+    report.status = "failed";
+    report.error = result.error;
+    write_report(result, report);
+    if (result.exit_code != 2) result.exit_code = 2;  // the render error is the one to report
+    return result;
+  }
+
+  {
+    SignalGuard signals;
+    try {
+      run.run();
+    } catch (const std::exception& e) {
+      result.exit_code = 1;
+      result.error = e.what();
+    }
+  }
+  Report report = run.finish(wall0);
+  if (result.exit_code != 0) {
+    report.status = "failed";
+    report.error = result.error;
+  }
+  result.cuts = report.cuts;
+  write_report(result, report);
+  return result;
+}
+
+}  // namespace octocut::engine

@@ -1,0 +1,451 @@
+// engine::World: one running scene. See world.hpp.
+#include "octocut/engine/run/world.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <stdexcept>
+
+#include "octocut/cutting/blade.hpp"
+#include "octocut/cutting/cutting.hpp"
+#include "octocut/cutting/mesh_check.hpp"
+#include "octocut/engine/render/camera.hpp"
+#include "octocut/engine/render/render_builder.hpp"
+#include "octocut/engine/run/scene_object.hpp"
+#include "octocut/engine/run/tool.hpp"
+#include "octocut/engine/scene/scene_loader.hpp"
+#include "octocut/sim/embedding.hpp"
+#include "octocut/sim/parallel.hpp"
+#include "octocut/sim/primitives.hpp"
+#include "octocut/sim/surface_check.hpp"
+#include "octocut/sim/timing.hpp"
+
+namespace octocut::engine {
+
+namespace {
+
+sim::Vec3 v3(const std::array<double, 3>& a) { return {a[0], a[1], a[2]}; }
+std::array<double, 3> a3(const sim::Vec3& v) { return {v.x(), v.y(), v.z()}; }
+
+std::string format_seconds(double t) {
+  char b[32];
+  std::snprintf(b, sizeof(b), "%.6g s", t);
+  return b;
+}
+
+// A tool at run time: its keyframes as poses, its blade (loaded for tools with cut events, or on the first cut_now),
+// its render mesh when drawn, and the pose a person set.
+struct ToolRuntime {
+  std::vector<sim::PoseKeyframe> keyframes;  // tool coordinates to world
+  std::optional<sim::TriMesh> blade;         // tool coordinates, m
+  double inscribed_radius = 0.0;             // m
+  std::optional<RenderMesh> mesh;            // drawn as metal
+  std::optional<sim::Pose> driven;           // set_tool_pose: overrides the keyframes
+};
+
+// A render prop at run time: its mesh and its keyframes.
+struct PropRuntime {
+  RenderMesh mesh;
+  std::vector<sim::PoseKeyframe> keyframes;
+};
+
+// A cut event of the timeline (ties: tool order, then the order in the tool's list).
+struct CutEvent {
+  double t;
+  std::size_t tool;
+};
+
+cutting::CutOptions cut_options(const CuttingSettings& s) {
+  cutting::CutOptions o;
+  o.fragments = s.remove_fragments == "none"    ? cutting::FragmentPolicy::none
+                : s.remove_fragments == "small" ? cutting::FragmentPolicy::small
+                                                : cutting::FragmentPolicy::all;
+  o.fragment_volume = s.fragment_volume;
+  o.verify = s.verify;
+  return o;
+}
+
+}  // namespace
+
+bool state_finite(const sim::SimState& state) {
+  for (std::size_t d = 0; d < state.x.size(); ++d)
+    if (!state.x[d].allFinite() || !state.v[d].allFinite()) return false;
+  return true;
+}
+
+struct World::Impl {
+  Scene scene;
+  WorldOptions options;
+  bool rendering = false;
+  long total_steps = 0;
+  long steps = 0;
+  std::vector<double> step_ms;
+
+  MaterialGraphSource graph_source = MaterialGraphSource::box;
+  cutting::CutObject object;                           // S (the one copy), M, the face grid
+  std::unique_ptr<sim::Simulator> sim;                 // model revision and state
+  std::unique_ptr<sim::SurfaceEmbedding> embedding;    // S bound to the current model
+  sim::Executor surface_exec;                          // deformed positions and normals, parallel over vertices
+  std::vector<sim::Vec3> deformed, deformed_normals;   // S after the last step (|V|, m; unit)
+
+  std::vector<ToolRuntime> tools;
+  std::vector<PropRuntime> props;
+  std::vector<CutEvent> events;
+  std::size_t next_event = 0;
+  cutting::CutOptions cut_options;
+
+  EmbeddedSurface box_tissue;  // a box primitive drawn as a finer grid of its faces (its 12 triangles shade flat)
+  Camera camera;               // the scene's camera before it follows a tool
+
+  std::vector<CutSummary> cuts;
+  std::vector<std::string> warnings;
+
+  Impl(const Scene& s, const WorldOptions& o);
+  void load_tools();
+  void load_props();
+  void bind_surface();
+  void check_start();
+  void ensure_blade(std::size_t tool);
+  void update_surface();
+  CutSummary cut(std::size_t tool, double t, bool scheduled);
+  void run_due_cuts(std::vector<CutSummary>& out);
+  [[nodiscard]] sim::Pose tool_pose(std::size_t tool, double t) const;
+  void record_counts(Report& r) const;
+  void record_state(Report& r) const;
+};
+
+World::Impl::Impl(const Scene& s, const WorldOptions& o)
+    : scene(s), options(o), rendering(s.render.enabled && o.render), total_steps(step_count(s)),
+      surface_exec(s.solver.threads) {
+  // Everything that is bad input is found here, before any output: the object, the props, the blades.
+  SceneObject built = build_scene_object(scene);
+  warnings = std::move(built.warnings);
+  graph_source = built.graph_source;
+  if (rendering) load_props();
+  load_tools();
+
+  // The cut object owns S and M; S was checked when it was loaded (load_mesh rejects a self-intersecting S, a box
+  // cannot intersect itself).
+  object.surface = std::move(built.surface);
+  object.cut_faces.assign(object.surface.triangles.size(), 0);
+  object.graph = built.graph;
+  object.surface_checked = true;
+  // The grid that finds S's faces near a blade, only for a scene that cuts (O(|S|), once); cut_now builds it on
+  // the first cut otherwise.
+  if (!events.empty()) cutting::index_surface(object);
+  cut_options = engine::cut_options(scene.cutting);
+
+  sim = std::make_unique<sim::Simulator>(std::move(built.model), simulator_options(scene));
+  check_start();
+  bind_surface();
+}
+
+void World::Impl::load_props() {
+  const std::vector<sim::TriMesh> meshes = load_render_props(scene);
+  for (std::size_t i = 0; i < meshes.size(); ++i) {
+    PropRuntime p;
+    p.mesh = prop_mesh(meshes[i], scene.render.props[i].material);
+    p.keyframes = pose_keyframes(scene.render.props[i].keyframes);
+    props.push_back(std::move(p));
+  }
+}
+
+void World::Impl::load_tools() {
+  // Blades validated and measured now for tools with cut events (a bad blade is bad input); meshes when drawn.
+  for (std::size_t i = 0; i < scene.tools.size(); ++i) {
+    const ToolSettings& t = scene.tools[i];
+    tools.emplace_back();
+    tools.back().keyframes = pose_keyframes(t.keyframes);
+    if (!t.cuts.empty()) ensure_blade(i);
+    if (rendering && !t.mesh_path.empty()) tools.back().mesh = prop_mesh(load_tool_mesh(scene, i), "metal");
+    if (t.collide)
+      warnings.push_back("/tools/" + std::to_string(i) +
+                         "/collide: tool contact is not implemented yet; the tool passes through tissue");
+    for (const ToolCut& c : t.cuts) events.push_back({c.t, i});
+  }
+  std::stable_sort(events.begin(), events.end(), [](const CutEvent& a, const CutEvent& b) { return a.t < b.t; });
+  for (const CutEvent& ev : events)
+    if (ev.t > scene.duration)
+      warnings.push_back("cut at t = " + format_seconds(ev.t) + " by " + scene.tools[ev.tool].name +
+                         " is after the end of the run and does not happen");
+}
+
+void World::Impl::ensure_blade(std::size_t i) {
+  ToolRuntime& tr = tools.at(i);
+  if (tr.blade) return;
+  std::vector<std::string> blade_warnings;
+  tr.blade = load_blade(scene, i, &blade_warnings);
+  tr.inscribed_radius = cutting::inscribed_radius(*tr.blade);
+  for (std::string& w : blade_warnings) warnings.push_back(std::move(w));
+}
+
+void World::Impl::check_start() {
+  // Handles that hold nothing, and a static solve that nothing holds.
+  const sim::ObjectModel& m0 = sim->model();
+  for (std::size_t h = 0; h < m0.handles().size(); ++h) {
+    if (std::none_of(m0.dof_handle().begin(), m0.dof_handle().end(), [&](int d) { return d == int(h); }))
+      warnings.push_back("/object/handles/" + std::to_string(h) + ": the handle holds no DOF");
+  }
+  if (scene.solver.mode == "static" &&
+      std::none_of(m0.dof_handle().begin(), m0.dof_handle().end(), [](int h) { return h >= 0; }))
+    warnings.push_back("/solver/mode: a static solve with no handle holding the object has no unique "
+                       "equilibrium (rigid motions are free)");
+}
+
+void World::Impl::bind_surface() {
+  // S embedded in T by the Z-curve list (SPEC §2.4); the deformed surface follows the DOFs.
+  const sim::ObjectModel& m0 = sim->model();
+  embedding = std::make_unique<sim::SurfaceEmbedding>(m0, object.surface.vertices, object.surface.triangles);
+  if (embedding->num_fallback() > 0)
+    warnings.push_back(std::to_string(embedding->num_fallback()) +
+                       " surface vertices lie outside every leaf and are bound to the nearest one");
+  update_surface();
+  if (!rendering) return;
+  if (!object.graph) {
+    const sim::Box3 box{v3(scene.object.surface_box.min), v3(scene.object.surface_box.max)};
+    box_tissue = embed_surface(m0, sim::box_face_grids(box, 32));
+  }
+  camera = make_camera(scene.render.camera, sim::bounds(object.surface));
+}
+
+void World::Impl::update_surface() {
+  if (object.removed) {
+    deformed.clear();
+    deformed_normals.clear();
+    return;
+  }
+  embedding->deformed_positions(sim->state().x, deformed, surface_exec);
+  embedding->deformed_normals(deformed, deformed_normals, surface_exec);
+}
+
+sim::Pose World::Impl::tool_pose(std::size_t i, double t) const {
+  const ToolRuntime& tr = tools.at(i);
+  return tr.driven ? *tr.driven : sim::interpolate_pose(tr.keyframes, t);
+}
+
+CutSummary World::Impl::cut(std::size_t i, double t, bool scheduled) {
+  // The blade where its tool is at the cut's time, through the cut pipeline (a transaction: skipped on failure).
+  ensure_blade(i);
+  const ToolRuntime& tr = tools[i];
+  const sim::Pose pose = tool_pose(i, t);
+  cutting::CutRequest req;
+  req.blade = *tr.blade;
+  for (sim::Vec3& p : req.blade.vertices) p = pose.apply(p);
+  req.inscribed_radius = tr.inscribed_radius;
+  const cutting::CutOutcome o = cutting::apply_cut(object, *sim, *embedding, req, cut_options);
+
+  CutSummary c;
+  c.t = t;
+  c.tool = scene.tools[i].name;
+  c.status = o.status;
+  c.reason = o.reason;
+  c.scheduled = scheduled;
+  c.components = o.components;
+  c.restricted_components = o.restricted_components;
+  c.unrestricted_components = o.unrestricted;
+  c.removed_volume_m3 = o.removed_volume;
+  c.tets_removed = o.tets_removed;
+  c.leaves_refined = o.leaves_refined;
+  c.fragments_removed = o.fragments_removed;
+  c.fragment_volume_m3 = o.fragment_volume;
+  c.elements_after = object.removed ? 0 : sim->model().num_elements();
+  c.dofs_after = object.removed ? 0 : sim->model().num_dofs();
+  c.surface_vertices_after = long(object.surface.num_vertices());
+  c.ms = {o.ms.back_transform, o.ms.surface, o.ms.material_graph, o.ms.refine, o.ms.node_split,
+          o.ms.embedding,      o.ms.solver_update, o.ms.total};
+  cuts.push_back(c);
+
+  // What the report should say about it.
+  const std::string what = "cut at t = " + format_seconds(t) + " by " + c.tool;
+  if (o.status == "skipped") warnings.push_back(what + " skipped: " + o.reason);
+  if (o.perturbed > 0)
+    warnings.push_back(what + ": a degenerate blade position was moved by 1e-9 of the blade's size");
+  if (o.unrestricted > 0)
+    warnings.push_back(what + ": the blade also covered other material in rest space, and could not be kept off it (" +
+                       std::to_string(o.unrestricted) + " component(s)): it cut all of it");
+  if (o.status == "ok") update_surface();
+  return c;
+}
+
+void World::Impl::run_due_cuts(std::vector<CutSummary>& out) {
+  const double now = sim->state().t;
+  while (next_event < events.size() && events[next_event].t <= now + 1e-9 * scene.solver.dt) {
+    const CutEvent ev = events[next_event++];
+    out.push_back(cut(ev.tool, ev.t, true));
+  }
+}
+
+void World::Impl::record_counts(Report& r) const {
+  // Counts of the current revision and of S.
+  const sim::ObjectModel& m = sim->model();
+  const sim::TriMesh& surface = object.surface;
+  r.object_removed = object.removed;
+  r.elements = object.removed ? 0 : m.num_elements();
+  r.dofs = object.removed ? 0 : m.num_dofs();
+  r.hanging_slots = object.removed ? 0 : m.dofs().hanging_slots;
+  r.tets = object.graph ? object.graph->num_tets() : 0;
+  r.surface_vertices = long(surface.num_vertices());
+  r.surface_triangles = long(surface.num_triangles());
+  const sim::SurfaceCheck check = sim::check_surface(surface);
+  r.surface_closed = check.closed && check.edge_manifold && check.oriented;
+  r.surface_components = check.components;
+  // Genus from the Euler characteristic of a closed surface: chi = V - E + F = 2 (components - genus).
+  if (r.surface_closed && !surface.triangles.empty()) {
+    const long chi = long(surface.num_vertices()) - long(3 * surface.num_triangles() / 2) + long(surface.num_triangles());
+    r.surface_genus = (2 * long(check.components) - chi) / 2;
+  }
+  // S is free of self-intersections: load_mesh rejects a self-intersecting mesh (CGAL, exact predicates), a box
+  // grid cannot intersect itself, and every cut checks its changed faces (cutting.verify) or is skipped. With
+  // verification off, the whole surface is checked here.
+  r.surface_self_intersecting = !scene.cutting.verify && !cuts.empty() && !surface.triangles.empty() &&
+                                cutting::find_self_intersection(surface).has_value();
+  r.rest_volume_m3 = sim::signed_volume(surface);
+}
+
+void World::Impl::record_state(Report& r) const {
+  // Probes, energies and the stability counters of the current state.
+  const sim::ObjectModel& m = sim->model();
+  for (const Probe& p : scene.probes) {
+    const auto e = object.removed ? std::nullopt : m.embed(v3(p.point));
+    if (!e) {
+      r.warnings.push_back("probe " + p.name + ": its point was cut away");
+      r.probes.push_back({p.name, p.point, {NAN, NAN, NAN}});
+      continue;
+    }
+    r.probes.push_back({p.name, p.point, a3(sim->position(*e) - v3(p.point))});
+  }
+  r.finite = state_finite(sim->state());
+  const sim::StabilityStats& st = sim->stats();
+  r.recoveries = st.recoveries;
+  r.failed_steps = st.failed_steps;
+  r.solver_failures = st.solver_failures;
+  r.nonfinite = st.nonfinite;
+  r.speed_limit = st.speed_limit;
+  r.newton_unconverged = st.newton_unconverged;
+  r.max_speed_m_s = st.max_speed;
+  r.kinetic_j = object.removed ? 0.0 : sim->kinetic_energy();
+  r.elastic_j = object.removed ? 0.0 : sim->elastic_energy();
+  r.sim_time_s = sim->state().t;
+  if (st.failed_steps > 0)
+    r.warnings.push_back(std::to_string(st.failed_steps) +
+                         " steps failed at the smallest dt and were reset (velocities zeroed)");
+  if (st.newton_unconverged > 0)
+    r.warnings.push_back(std::to_string(st.newton_unconverged) + " static solves stopped unconverged");
+}
+
+// ---- World ---------------------------------------------------------------------------------------------------------
+
+World::World(const Scene& scene, const WorldOptions& options) : m(std::make_unique<Impl>(scene, options)) {}
+World::~World() = default;
+World::World(World&&) noexcept = default;
+World& World::operator=(World&&) noexcept = default;
+
+StepResult World::step() {
+  const auto t0 = sim::Clock::now();
+  StepResult r;
+  m->run_due_cuts(r.cuts);
+  if (!m->object.removed) {
+    m->sim->step();
+  } else {
+    // Nothing left to simulate: time still runs for the tools and the renderer.
+    sim::SimState st = m->sim->state();
+    st.t += m->scene.solver.dt;
+    m->sim->set_state(std::move(st));
+  }
+  m->update_surface();
+  m->run_due_cuts(r.cuts);
+  ++m->steps;
+  r.t = m->sim->state().t;
+  r.ms = sim::ms_since(t0);
+  m->step_ms.push_back(r.ms);
+  return r;
+}
+
+double World::time() const { return m->sim->state().t; }
+long World::steps() const { return m->steps; }
+long World::total_steps() const { return m->total_steps; }
+bool World::done() const { return m->steps >= m->total_steps; }
+
+CutSummary World::cut_now(std::size_t tool) {
+  if (tool >= m->tools.size()) throw std::out_of_range("World::cut_now: no tool " + std::to_string(tool));
+  return m->cut(tool, time(), false);
+}
+
+void World::set_tool_pose(std::size_t tool, const sim::Pose& pose) { m->tools.at(tool).driven = pose; }
+void World::release_tool(std::size_t tool) { m->tools.at(tool).driven.reset(); }
+sim::Pose World::tool_pose(std::size_t tool) const { return m->tool_pose(tool, time()); }
+
+std::optional<std::size_t> World::tool_index(const std::string& name) const {
+  for (std::size_t i = 0; i < m->scene.tools.size(); ++i)
+    if (m->scene.tools[i].name == name) return i;
+  return std::nullopt;
+}
+
+bool World::renders() const { return m->rendering; }
+
+RenderScene World::render_scene() const {
+  if (!m->rendering) throw std::logic_error("World::render_scene: this world does not render");
+  const Scene& scene = m->scene;
+  const double t = time();
+  RenderScene rs;
+  rs.width = scene.render.width;
+  rs.height = scene.render.height;
+  rs.msaa = scene.render.msaa;
+  rs.camera = m->camera;
+  const sim::ObjectModel& model = m->sim->model();
+  std::vector<sim::Vec3> slots;
+  model.dofs().prolong(m->sim->state().x, slots);
+  if (m->object.removed) {
+    // Nothing left to draw of the tissue.
+  } else if (!m->object.graph) {
+    rs.meshes.push_back(tissue_mesh(model, m->box_tissue, slots));
+  } else {
+    // The mesh surface S as the Z-curve embedding moved it after the last step, cut faces tinted.
+    RenderMesh tissue = tissue_mesh(m->deformed, m->deformed_normals, m->object.surface.triangles);
+    tissue.cut.assign(m->object.cut_faces.begin(), m->object.cut_faces.end());
+    rs.meshes.push_back(std::move(tissue));
+  }
+  // Props and tools at their pose now; the camera follows the one it is told to.
+  for (std::size_t i = 0; i < m->props.size(); ++i) {
+    const sim::Pose pose = sim::interpolate_pose(m->props[i].keyframes, t);
+    RenderMesh mesh = m->props[i].mesh;
+    mesh.model = pose.matrix().cast<float>();
+    rs.meshes.push_back(std::move(mesh));
+    if (scene.render.props[i].name == scene.render.camera.follow_tool) follow_tool(rs.camera, pose.position);
+  }
+  for (std::size_t i = 0; i < m->tools.size(); ++i) {
+    const sim::Pose pose = m->tool_pose(i, t);
+    if (m->tools[i].mesh) {
+      RenderMesh mesh = *m->tools[i].mesh;
+      mesh.model = pose.matrix().cast<float>();
+      rs.meshes.push_back(std::move(mesh));
+    }
+    if (scene.tools[i].name == scene.render.camera.follow_tool) follow_tool(rs.camera, pose.position);
+  }
+  if (!m->object.removed) add_overlays(rs, scene.render.overlays, model, slots, m->sim->state().x);
+  return rs;
+}
+
+Report World::report() const {
+  Report r;
+  r.scene = m->scene.file;
+  r.name = m->scene.name;
+  r.steps = m->steps;
+  r.step_ms = TimingSummary::of(m->step_ms);
+  r.warnings = m->warnings;
+  r.cuts = m->cuts;
+  r.subsystems.cut_index = m->object.grid.grid != nullptr;
+  r.subsystems.material_graph = to_string(m->graph_source);
+  m->record_counts(r);
+  m->record_state(r);
+  return r;
+}
+
+const Scene& World::scene() const { return m->scene; }
+const sim::Simulator& World::simulator() const { return *m->sim; }
+const sim::TriMesh& World::rest_surface() const { return m->object.surface; }
+const std::vector<sim::Vec3>& World::deformed_vertices() const { return m->deformed; }
+sim::TriMesh World::deformed_surface() const { return sim::TriMesh{m->deformed, m->object.surface.triangles}; }
+bool World::object_removed() const { return m->object.removed; }
+
+}  // namespace octocut::engine

@@ -1,0 +1,357 @@
+// Golden images rendered headless (Mesa llvmpipe in CI): small deterministic scenes compared with PNGs under
+// tests/render/golden/ within the tolerance stated in each test's JSON file, plus checks against independent truth
+// (the background colour, the mask, overlay colours at projected points, cut faces tinted red).
+//
+// Regenerate the references on purpose with OCTOCUT_REGENERATE_GOLDEN=1 build/bin/render_golden_test; review the
+// new PNGs before committing them.
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <numbers>
+
+#include "octocut/engine/render/frame_writer.hpp"
+#include "octocut/engine/io/io.hpp"
+#include "octocut/engine/render/renderer.hpp"
+
+namespace octocut::engine {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr int kWidth = 160, kHeight = 120;
+
+/// A UV sphere of radius r around c, counter-clockwise from outside.
+RenderMesh sphere(const Eigen::Vector3f& c, float r, int segments, int rings, MaterialKind material) {
+  RenderMesh m;
+  m.material = material;
+  for (int i = 0; i <= rings; ++i) {
+    const float theta = float(std::numbers::pi) * float(i) / float(rings);
+    for (int k = 0; k <= segments; ++k) {
+      const float phi = 2.0f * float(std::numbers::pi) * float(k) / float(segments);
+      const Eigen::Vector3f n(std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi), std::cos(theta));
+      m.positions.push_back(c + r * n);
+      m.normals.push_back(n);
+    }
+  }
+  for (int i = 0; i < rings; ++i)
+    for (int k = 0; k < segments; ++k) {
+      const int a = i * (segments + 1) + k, b = a + segments + 1;
+      m.triangles.push_back({a, b, b + 1});
+      m.triangles.push_back({a, b + 1, a + 1});
+    }
+  return m;
+}
+
+/// A closed cylinder along z from z0 to z1 (a procedural tool shaft), normals computed by the renderer.
+RenderMesh cylinder(float radius, float z0, float z1, int segments) {
+  RenderMesh m;
+  m.material = MaterialKind::metal;
+  for (int k = 0; k < segments; ++k) {
+    const float phi = 2.0f * float(std::numbers::pi) * float(k) / float(segments);
+    m.positions.push_back({radius * std::cos(phi), radius * std::sin(phi), z0});
+    m.positions.push_back({radius * std::cos(phi), radius * std::sin(phi), z1});
+  }
+  const int bottom = int(m.positions.size()), top = bottom + 1;
+  m.positions.push_back({0, 0, z0});
+  m.positions.push_back({0, 0, z1});
+  for (int k = 0; k < segments; ++k) {
+    const int a = 2 * k, b = 2 * ((k + 1) % segments);
+    m.triangles.push_back({a, b, b + 1});
+    m.triangles.push_back({a, b + 1, a + 1});
+    m.triangles.push_back({bottom, b, a});
+    m.triangles.push_back({top, a + 1, b + 1});
+  }
+  return m;
+}
+
+/// A box as a grid of 4 x 4 cells per face (6 faces, separate vertices), as the tissue of a box object.
+RenderMesh box(const Eigen::Vector3f& lo, const Eigen::Vector3f& hi) {
+  RenderMesh m;
+  for (int a = 0; a < 3; ++a)
+    for (int side = 0; side < 2; ++side) {
+      int u = (a + 1) % 3, v = (a + 2) % 3;
+      if (side == 0) std::swap(u, v);
+      const int first = int(m.positions.size());
+      for (int j = 0; j <= 4; ++j)
+        for (int i = 0; i <= 4; ++i) {
+          Eigen::Vector3f p;
+          p[a] = side ? hi[a] : lo[a];
+          p[u] = lo[u] + (hi[u] - lo[u]) * float(i) / 4.0f;
+          p[v] = lo[v] + (hi[v] - lo[v]) * float(j) / 4.0f;
+          m.positions.push_back(p);
+        }
+      for (int j = 0; j < 4; ++j)
+        for (int i = 0; i < 4; ++i) {
+          const int p00 = first + j * 5 + i;
+          m.triangles.push_back({p00, p00 + 1, p00 + 6});
+          m.triangles.push_back({p00, p00 + 6, p00 + 5});
+        }
+    }
+  m.normals = mesh_normals(m.positions, m.triangles);
+  return m;
+}
+
+RenderScene base_scene() {
+  RenderScene s;
+  s.width = kWidth;
+  s.height = kHeight;
+  s.msaa = 4;
+  s.background = Eigen::Vector3f(0.2f, 0.2f, 0.2f);  // exactly 51 in 8 bits
+  s.camera.position = {0.0, -4.0, 1.0};
+  s.camera.target = {0.0, 0.0, 0.0};
+  s.camera.up = {0.0, 0.0, 1.0};
+  s.camera.fov_deg = 45.0;
+  s.camera.near = 0.1;
+  s.camera.far = 20.0;
+  return s;
+}
+
+std::array<int, 3> pixel(const Image& image, int x, int y) {
+  const std::size_t i = 3 * (std::size_t(y) * image.width + x);
+  return {image.rgb[i], image.rgb[i + 1], image.rgb[i + 2]};
+}
+
+std::array<int, 3> pixel_at(const Image& image, const Camera& camera, const Eigen::Vector3d& world) {
+  const Eigen::Vector3d p = project_to_pixel(camera, image.width, image.height, world);
+  const int x = int(std::floor(p.x())), y = int(std::floor(p.y()));
+  const bool inside = x >= 0 && y >= 0 && x < image.width && y < image.height;
+  EXPECT_TRUE(inside) << "the point " << world.transpose() << " projects outside the image";
+  return inside ? pixel(image, x, y) : std::array<int, 3>{-1, -1, -1};
+}
+
+class GoldenTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!renderer_available()) GTEST_SKIP() << "built without EGL";
+    if (!s_renderer) s_renderer = make_renderer();
+  }
+
+  /// Renders `scene`, checks that a second render is bit-identical, and compares with golden/<name>.png.
+  Image render_and_compare(const std::string& name, const RenderScene& scene) {
+    const Image image = s_renderer->render(scene);
+    EXPECT_EQ(image.width, scene.width);
+    EXPECT_EQ(image.height, scene.height);
+    EXPECT_EQ(s_renderer->render(scene).rgb, image.rgb) << "rendering is not deterministic";
+
+    const fs::path dir = fs::path(OCTOCUT_SOURCE_DIR) / "tests/engine/render/golden";
+    const fs::path png = dir / (name + ".png"), tolerance_file = dir / (name + ".json");
+    const char* regenerate = std::getenv("OCTOCUT_REGENERATE_GOLDEN");
+    if (regenerate != nullptr && std::string(regenerate) == "1") {
+      write_file_atomic(png, encode_png(image, 9));
+      if (!fs::exists(tolerance_file))
+        write_file_atomic(tolerance_file, "{\"threshold\": 2, \"max_diff\": 48, \"max_fraction\": 0.01}\n");
+      return image;
+    }
+
+    // Tolerance: a pixel differs when a channel is off by more than `threshold`; at most `max_fraction` of the
+    // pixels may differ, and none by more than `max_diff`.
+    const nlohmann::json tol = nlohmann::json::parse(read_file(tolerance_file));
+    const int threshold = tol.at("threshold").get<int>(), max_diff = tol.at("max_diff").get<int>();
+    const double max_fraction = tol.at("max_fraction").get<double>();
+    const Image golden = decode_png(read_file(png), png.string());
+    EXPECT_EQ(golden.width, image.width);
+    EXPECT_EQ(golden.height, image.height);
+    if (golden.rgb.size() != image.rgb.size()) return image;
+    int worst = 0;
+    long differing = 0;
+    for (std::size_t p = 0; p < image.rgb.size(); p += 3) {
+      int d = 0;
+      for (int c = 0; c < 3; ++c) d = std::max(d, std::abs(int(image.rgb[p + c]) - int(golden.rgb[p + c])));
+      worst = std::max(worst, d);
+      differing += d > threshold ? 1 : 0;
+    }
+    const double fraction = double(differing) / double(image.width * image.height);
+    EXPECT_LE(worst, max_diff) << name;
+    EXPECT_LE(fraction, max_fraction) << name;
+    if (worst > max_diff || fraction > max_fraction) {
+      const fs::path actual = fs::temp_directory_path() / ("octocut_golden_" + name + "_actual.png");
+      write_file_atomic(actual, encode_png(image));
+      ADD_FAILURE() << "the rendered image is at " << actual;
+    }
+    return image;
+  }
+
+  static std::unique_ptr<Renderer> s_renderer;
+};
+
+std::unique_ptr<Renderer> GoldenTest::s_renderer;
+
+TEST_F(GoldenTest, ShadedSphere) {
+  RenderScene scene = base_scene();
+  scene.meshes.push_back(sphere({0, 0, 0}, 1.0f, 32, 16, MaterialKind::tissue));
+  const Image image = render_and_compare("sphere", scene);
+  // Background exactly the clear colour in the corners.
+  EXPECT_EQ(pixel(image, 0, 0), (std::array<int, 3>{51, 51, 51}));
+  EXPECT_EQ(pixel(image, kWidth - 1, kHeight - 1), (std::array<int, 3>{51, 51, 51}));
+  // With the headlight, the point facing the eye is brighter than a point near the silhouette.
+  const Eigen::Vector3d facing = Eigen::Vector3d(0.0, -4.0, 1.0).normalized();
+  const Eigen::Vector3d grazing = Eigen::Vector3d(0.97, 0.0, 0.24).normalized();
+  const auto centre = pixel_at(image, scene.camera, facing), edge = pixel_at(image, scene.camera, grazing);
+  EXPECT_GT(centre[0] + centre[1] + centre[2], edge[0] + edge[1] + edge[2] + 60);
+  // Tissue is pink: red above green and blue.
+  EXPECT_GT(centre[0], centre[1]);
+  EXPECT_GT(centre[0], centre[2]);
+}
+
+TEST_F(GoldenTest, CullingBackFacesOnTheCpuChangesNoPixel) {
+  // Closed meshes drop their back faces before upload; drawing every face (no culling at all) must give the same image,
+  // since the depth test hides the back faces anyway, except along silhouettes, where multisampled coverage of the
+  // back faces differs. A wrongly culled front face would leave a hole of many pixels. The moved and rotated tool
+  // checks the eye's transform into model space.
+  RenderScene culled = base_scene();
+  culled.meshes.push_back(sphere({0, 0, 0}, 1.0f, 48, 24, MaterialKind::tissue));
+  RenderMesh tool = cylinder(0.2f, -0.5f, 1.5f, 24);
+  tool.material = MaterialKind::metal;
+  tool.model.topLeftCorner<3, 3>() = Eigen::AngleAxisf(0.7f, Eigen::Vector3f(1, 1, 0).normalized()).toRotationMatrix();
+  tool.model.topRightCorner<3, 1>() = Eigen::Vector3f(0.9f, -1.2f, 0.3f);
+  culled.meshes.push_back(tool);
+  RenderScene all = culled;
+  for (RenderMesh& m : all.meshes) m.cull_back_faces = false;
+  const Image a = s_renderer->render(culled), b = s_renderer->render(all);
+  ASSERT_EQ(a.rgb.size(), b.rgb.size());
+  long differing = 0;
+  for (std::size_t i = 0; i < a.rgb.size(); ++i) differing += std::abs(int(a.rgb[i]) - int(b.rgb[i])) > 2 ? 1 : 0;
+  EXPECT_LE(double(differing) / double(a.rgb.size()), 0.005) << differing << " channel values differ";
+}
+
+TEST_F(GoldenTest, TheMultisampledRegionNeverClipsGeometry) {
+  // Only the screen rectangle that geometry can reach is multisampled. A sphere partly outside the frame, alone, must
+  // come out exactly as when a small second mesh in the far corner makes the rectangle cover the whole frame.
+  RenderScene alone = base_scene();
+  alone.meshes.push_back(sphere({1.2f, 0.0f, 0.3f}, 0.8f, 48, 24, MaterialKind::tissue));
+  RenderScene wide = alone;
+  RenderMesh speck = box({-2.0f, 0.0f, -1.05f}, {-1.9f, 0.1f, -0.95f});
+  wide.meshes.push_back(speck);
+  const Image a = s_renderer->render(alone), b = s_renderer->render(wide);
+  ASSERT_EQ(a.rgb.size(), b.rgb.size());
+  // Compare every pixel that the speck does not cover (its projected box, with a margin).
+  Eigen::Vector3d lo(1e9, 1e9, 0), hi(-1e9, -1e9, 0);
+  for (int k = 0; k < 8; ++k) {
+    const Eigen::Vector3d corner(k & 1 ? -1.9 : -2.0, k & 2 ? 0.1 : 0.0, k & 4 ? -0.95 : -1.05);
+    const Eigen::Vector3d p = project_to_pixel(wide.camera, kWidth, kHeight, corner);
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  long sphere_pixels = 0, differing = 0;
+  for (int y = 0; y < kHeight; ++y)
+    for (int x = 0; x < kWidth; ++x) {
+      if (x >= lo.x() - 2 && x <= hi.x() + 2 && y >= lo.y() - 2 && y <= hi.y() + 2) continue;
+      const auto pa = pixel(a, x, y), pb = pixel(b, x, y);
+      differing += pa != pb ? 1 : 0;
+      sphere_pixels += pa != std::array<int, 3>{51, 51, 51} ? 1 : 0;
+    }
+  EXPECT_EQ(differing, 0);
+  EXPECT_GT(sphere_pixels, 1000);  // the sphere is there, and large
+}
+
+TEST_F(GoldenTest, TissueWithCutFacesAMetalToolAndBone) {
+  RenderScene scene = base_scene();
+  RenderMesh tissue = box({-1.0f, -0.6f, -0.5f}, {1.0f, 0.6f, 0.3f});
+  // The front face (-y) is face 2 * 1 + 0 = 2 in box(): 32 triangles from index 64. Tint its left half as cut.
+  tissue.cut.assign(tissue.triangles.size(), 0);
+  for (int t = 64; t < 96; ++t) {
+    const auto& tri = tissue.triangles[std::size_t(t)];
+    const float x = (tissue.positions[tri[0]].x() + tissue.positions[tri[1]].x() + tissue.positions[tri[2]].x()) / 3;
+    if (x < 0.0f) tissue.cut[std::size_t(t)] = 1;
+  }
+  scene.meshes.push_back(tissue);
+  // The tool: a cylinder tilted into the view, moved by its model transform.
+  RenderMesh tool = cylinder(0.12f, 0.0f, 2.0f, 24);
+  Eigen::Affine3f pose = Eigen::Translation3f(0.5f, -0.9f, 0.3f) * Eigen::AngleAxisf(0.6f, Eigen::Vector3f::UnitX());
+  tool.model = pose.matrix();
+  scene.meshes.push_back(tool);
+  scene.meshes.push_back(sphere({-1.4f, 0.8f, -0.2f}, 0.5f, 24, 12, MaterialKind::bone));
+  const Image image = render_and_compare("tools", scene);
+  // A cut face is fresh-tissue red; the uncut half of the same face is pink (green well above the cut's).
+  const auto cut = pixel_at(image, scene.camera, {-0.5, -0.6, -0.1});
+  const auto uncut = pixel_at(image, scene.camera, {0.25, -0.6, -0.3});
+  EXPECT_GT(cut[0], 3 * cut[1]) << cut[0] << " " << cut[1];
+  EXPECT_GT(uncut[1], cut[1] + 40);
+  // The tool is grey: its channels are within a few levels of each other.
+  const Eigen::Vector3d on_tool = (pose * Eigen::Vector3f(0.0f, -0.12f, 0.8f)).cast<double>();
+  const auto metal = pixel_at(image, scene.camera, on_tool);
+  EXPECT_LE(std::abs(metal[0] - metal[2]), 25);
+  EXPECT_NE(metal, (std::array<int, 3>{51, 51, 51}));
+}
+
+TEST_F(GoldenTest, ArthroscopeMask) {
+  RenderScene scene = base_scene();
+  scene.meshes.push_back(sphere({0, 0, 0}, 1.2f, 32, 16, MaterialKind::tissue));
+  scene.camera.arthroscope = true;
+  scene.camera.mask = true;
+  scene.camera.mask_radius = 0.9;
+  const Image image = render_and_compare("arthroscope", scene);
+  // Outside the circle of radius 0.9 * 60 = 54 px around (80, 60): black. Inside: the scene.
+  EXPECT_EQ(pixel(image, 0, 0), (std::array<int, 3>{0, 0, 0}));
+  EXPECT_EQ(pixel(image, 80 + 60, 60), (std::array<int, 3>{0, 0, 0}));
+  EXPECT_EQ(pixel(image, 80, 60 - 57), (std::array<int, 3>{0, 0, 0}));
+  EXPECT_NE(pixel(image, 80, 60), (std::array<int, 3>{0, 0, 0}));
+  EXPECT_EQ(pixel(image, 80 + 50, 10 + 0), (std::array<int, 3>{0, 0, 0}));  // distance sqrt(50² + 50²) > 54
+  EXPECT_EQ(pixel(image, 80 + 45, 60), (std::array<int, 3>{51, 51, 51}));   // inside the circle, off the sphere
+}
+
+TEST_F(GoldenTest, DebugOverlays) {
+  RenderScene scene = base_scene();
+  scene.meshes.push_back(box({-1.0f, -1.0f, -1.0f}, {1.0f, 1.0f, 1.0f}));
+  OverlayLines wire;
+  wire.color = Eigen::Vector3f(0.0f, 1.0f, 1.0f);
+  for (int k = 0; k < 8; ++k)
+    for (const int bit : {1, 2, 4})
+      if (!(k & bit)) {
+        const auto corner = [](int c) {
+          return Eigen::Vector3f(c & 1 ? 1.0f : -1.0f, c & 2 ? 1.0f : -1.0f, c & 4 ? 1.0f : -1.0f);
+        };
+        wire.endpoints.push_back(corner(k));
+        wire.endpoints.push_back(corner(k | bit));
+      }
+  scene.lines.push_back(wire);
+  OverlayPoints dofs;
+  dofs.color = Eigen::Vector3f(1.0f, 0.8f, 0.2f);  // 255, 204, 51
+  dofs.size_px = 6.0f;
+  dofs.points = {{-1.0f, -1.0f, 1.0f}, {1.0f, -1.0f, 1.0f}, {0.0f, 0.0f, 1.0f}, {1.0f, 1.0f, -1.0f}};
+  scene.points.push_back(dofs);
+  scene.camera.position = {2.5, -4.0, 3.0};
+  const Image image = render_and_compare("overlays", scene);
+  // Points are drawn on top, unlit: the exact colour at each projected point, even the one behind the box.
+  for (const Eigen::Vector3f& p : dofs.points)
+    EXPECT_EQ(pixel_at(image, scene.camera, p.cast<double>()), (std::array<int, 3>{255, 204, 51})) << p.transpose();
+}
+
+}  // namespace
+}  // namespace octocut::engine
+
+namespace octocut::engine {
+namespace {
+
+TEST_F(GoldenTest, BadScenesAreErrorsNotCrashes) {
+  RenderScene scene = base_scene();
+  RenderMesh mesh = sphere({0, 0, 0}, 1.0f, 8, 4, MaterialKind::tissue);
+  // A triangle index past the vertices.
+  RenderMesh bad_index = mesh;
+  bad_index.triangles.push_back({0, 1, int(mesh.positions.size())});
+  scene.meshes = {bad_index};
+  EXPECT_THROW(s_renderer->render(scene), RenderError);
+  // Normals and cut flags that do not match the vertices and triangles.
+  RenderMesh bad_normals = mesh;
+  bad_normals.normals.pop_back();
+  scene.meshes = {bad_normals};
+  EXPECT_THROW(s_renderer->render(scene), RenderError);
+  RenderMesh bad_cut = mesh;
+  bad_cut.cut.assign(3, 1);
+  scene.meshes = {bad_cut};
+  EXPECT_THROW(s_renderer->render(scene), RenderError);
+  // An empty image.
+  scene.meshes = {mesh};
+  scene.width = 0;
+  EXPECT_THROW(s_renderer->render(scene), RenderError);
+  // The renderer still works afterwards.
+  scene.width = kWidth;
+  EXPECT_EQ(s_renderer->render(scene).rgb.size(), std::size_t(3) * kWidth * kHeight);
+}
+
+}  // namespace
+}  // namespace octocut::engine

@@ -17,6 +17,7 @@
 #include "octocut/engine/scene_loader.hpp"
 #include "octocut/engine/tool.hpp"
 #include "octocut/engine/world.hpp"
+#include "octocut/version.hpp"
 
 namespace {
 
@@ -170,6 +171,7 @@ int cmd_bench(std::vector<std::string> names, const std::string& json_path, bool
 int main(int argc, char** argv) {
   CLI::App app{"octocut: robust interactive cutting on an adaptive octree (Seiler et al. 2011)"};
   app.require_subcommand(1);
+  app.set_version_flag("--version", std::string("octocut ") + octocut::kVersion, "Print the version and exit");
 
   std::string scene_path, out = "out", json_path;
   std::vector<std::string> sets, names;

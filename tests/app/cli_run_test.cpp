@@ -156,6 +156,12 @@ TEST_F(CliRunTest, UsageErrorsExitTwo) {
   EXPECT_EQ(run_octocut("--help").exit_code, 0);
 }
 
+TEST_F(CliRunTest, VersionFlagPrintsTheVersion) {
+  const CommandResult r = run_octocut("--version");
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_EQ(r.output.rfind("octocut ", 0), 0u) << r.output;  // install_consumer checks the exact version
+}
+
 }  // namespace
 
 TEST_F(CliRunTest, RandomPunchesIntoTheMeniscusAreNeverSkipped) {

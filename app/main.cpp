@@ -18,6 +18,7 @@
 #include "octocut/engine/run/tool.hpp"
 #include "octocut/engine/run/run.hpp"
 #include "octocut/engine/run/scene_object.hpp"
+#include "octocut/version.hpp"
 
 namespace {
 
@@ -172,6 +173,7 @@ int cmd_bench(std::vector<std::string> names, const std::string& json_path, bool
 int main(int argc, char** argv) {
   CLI::App app{"octocut: robust interactive cutting on an adaptive octree (Seiler et al. 2011)"};
   app.require_subcommand(1);
+  app.set_version_flag("--version", std::string("octocut ") + octocut::kVersion, "Print the version and exit");
 
   std::string scene_path, out = "out", json_path;
   std::vector<std::string> sets, names;

@@ -23,10 +23,6 @@ TriMesh box_grid(const Box3& b, int cells, bool welded) {
   TriMesh m;
   std::map<std::array<int, 3>, int32_t> index;  // grid node -> vertex
   auto vertex = [&](std::array<int, 3> g) {
-    if (!welded) {
-      m.vertices.emplace_back(coord(0, g[0]), coord(1, g[1]), coord(2, g[2]));
-      return int32_t(m.vertices.size() - 1);
-    }
     auto [it, fresh] = index.emplace(g, int32_t(m.vertices.size()));
     if (fresh) m.vertices.emplace_back(coord(0, g[0]), coord(1, g[1]), coord(2, g[2]));
     return it->second;
@@ -49,6 +45,7 @@ TriMesh box_grid(const Box3& b, int cells, bool welded) {
           m.triangles.push_back({p00, p11, p01});
         }
       }
+      if (!welded) index.clear();  // the next face gets vertices of its own
     }
   }
   return m;

@@ -1,5 +1,5 @@
 // `octocut run` end to end: the shipped cantilever against beam theory, bit-identical reports, a run stopped
-// part-way still writes a failed report, usage errors exit 2. Rendering runs are tested in tests/render/.
+// part-way still writes a failed report, usage errors exit 2. Rendering runs are tested in tests/engine/render/.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -11,10 +11,13 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <numbers>
 #include <string>
 
 #include "common/cli_util.hpp"
 #include "common/temp_dir.hpp"
+#include "octocut/engine/io/mesh_io.hpp"
+#include "octocut/sim/surface.hpp"
 #include <thread>
 
 namespace {
@@ -142,6 +145,41 @@ TEST_F(CliRunTest, UsageErrorsExitTwo) {
   EXPECT_EQ(run_octocut("run").exit_code, 2);
   EXPECT_EQ(run_octocut("bench no-such-benchmark --quiet").exit_code, 2);
   EXPECT_EQ(run_octocut("--help").exit_code, 0);
+}
+
+TEST_F(CliRunTest, UnwritableOutputDirectoryFailsWithoutClaimingAReport) {
+  const fs::path scene = write("cube.json", kCube);
+  const CommandResult r = run_octocut("run '" + scene.string() + "' --quiet --out /proc/octocut_no_such_dir");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("cannot create the output directory"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("report written"), std::string::npos) << r.output;
+}
+
+TEST_F(CliRunTest, SurfaceFinalAlsoWritesTheRestSurfaceAfterTheCuts) {
+  // A 2 mm-radius 32-gon punch through the cube's centre at t = 0.02 s: the rest surface after the cut encloses the
+  // cube less the prism, the one before it the whole cube.
+  json j = json::parse(kCube);
+  j["tools"] = json::parse(R"([{"name": "punch", "blade": {"cylinder": {"radius": 0.002, "height": 0.03, "segments": 32}},
+                                 "keyframes": [{"t": 0, "position": [0.005, 0.005, 0.005]}], "cuts": [{"t": 0.02}]}])");
+  j["object"]["material_graph"] = {{"cell_size", 0.001}};
+  j["output"] = {{"surface_final", true}};
+  j["solver"]["gravity"] = {0, 0, 0};
+  const fs::path scene = write("punched.json", j.dump());
+  const CommandResult r = run_octocut("run '" + scene.string() + "' --quiet --out '" + (m_dir / "out").string() + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json report = read_json(m_dir / "out" / "report.json");
+  ASSERT_EQ(report["cuts"][0]["status"], "ok");
+  const double prism = 0.5 * 32 * 0.002 * 0.002 * std::sin(2.0 * std::numbers::pi / 32) * 0.01;
+  const auto volume = [](const fs::path& ply) { return octocut::sim::signed_volume(octocut::engine::load_mesh(ply, {1.0, true, false}).mesh); };
+  EXPECT_NEAR(volume(m_dir / "out" / "surface_rest.ply"), 1e-6, 1e-12);
+  EXPECT_NEAR(volume(m_dir / "out" / "surface_rest_final.ply"), 1e-6 - prism, 1e-12);
+  EXPECT_TRUE(fs::exists(m_dir / "out" / "surface_final.ply"));
+}
+
+TEST_F(CliRunTest, VersionFlagPrintsTheVersion) {
+  const CommandResult r = run_octocut("--version");
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_EQ(r.output.rfind("octocut ", 0), 0u) << r.output;  // install_consumer checks the exact version
 }
 
 }  // namespace

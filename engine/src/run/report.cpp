@@ -4,9 +4,11 @@
 #include <cmath>
 #include <nlohmann/json.hpp>
 
+#include "octocut/version.hpp"
+
 namespace octocut::engine {
 
-const char* version() { return OCTOCUT_VERSION; }
+const char* version() { return kVersion; }
 
 TimingSummary TimingSummary::of(std::vector<double> s) {
   TimingSummary t;

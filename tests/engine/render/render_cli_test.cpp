@@ -89,6 +89,16 @@ TEST_F(RenderCliTest, WithoutFramesNothingIsWrittenButFramesAreRendered) {
   EXPECT_FALSE(fs::exists(m_dir / "n/frames"));
   EXPECT_EQ(report("n")["frames"]["rendered"].get<int>(), 3);
   EXPECT_EQ(report("n")["frames"]["written"].get<int>(), 0);
+  // A renderer, but no frame writer without output.frames.
+  EXPECT_EQ(report("n")["subsystems"]["renderer"], true);
+  EXPECT_EQ(report("n")["subsystems"]["frame_writer"], false);
+  // With frames: both; with --no-render: neither, and no EGL is touched (a forced EGL failure does not matter).
+  ASSERT_EQ(run("w").exit_code, 0);
+  EXPECT_EQ(report("w")["subsystems"]["renderer"], true);
+  EXPECT_EQ(report("w")["subsystems"]["frame_writer"], true);
+  ASSERT_EQ(run("x", "--no-render", "OCTOCUT_EGL_FORCE_FAIL=1").exit_code, 0);
+  EXPECT_EQ(report("x")["subsystems"]["renderer"], false);
+  EXPECT_EQ(report("x")["subsystems"]["frame_writer"], false);
 }
 
 TEST_F(RenderCliTest, AFailureMidRunKeepsTheFramesWrittenSoFar) {

@@ -190,6 +190,26 @@ TEST_F(ToolFileTest, MeshBladeIsScaledAndValidated) {
   EXPECT_NEAR(summary[0].blade_volume_m3, volume, 1e-6 * volume);
 }
 
+TEST_F(ToolFileTest, InvertedBladeIsFlippedWithAWarning) {
+  // The same cylinder with every triangle reversed: flipped back, and said so, as for a surface.
+  sim::TriMesh inverted = sim::cylinder_mesh(2.0, 10.0, 16);
+  for (auto& t : inverted.triangles) std::swap(t[1], t[2]);
+  save_mesh(m_dir / "inverted.ply", inverted);
+  const Scene scene = load_scene(write_scene(R"("inverted.ply", "scale": 0.001)"));
+  std::vector<std::string> warnings;
+  const sim::TriMesh blade = load_blade(scene, 0, &warnings);
+  EXPECT_GT(sim::signed_volume(blade), 0.0);
+  ASSERT_EQ(warnings.size(), 1u);
+  EXPECT_EQ(warnings[0].rfind("/tools/0/blade: ", 0), 0u) << warnings[0];
+  EXPECT_NE(warnings[0].find("reoriented"), std::string::npos) << warnings[0];
+  EXPECT_EQ(validate_tools(scene).at(0).warnings, warnings);
+  // A correctly oriented blade gives none.
+  save_mesh(m_dir / "ok.ply", sim::cylinder_mesh(2.0, 10.0, 16));
+  warnings.clear();
+  (void)load_blade(load_scene(write_scene(R"("ok.ply", "scale": 0.001)")), 0, &warnings);
+  EXPECT_TRUE(warnings.empty());
+}
+
 TEST_F(ToolFileTest, OpenBladeIsRejectedNamingThePointer) {
   sim::TriMesh open = sim::cylinder_mesh(1.0, 1.0, 8);
   open.triangles.pop_back();

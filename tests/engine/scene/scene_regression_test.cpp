@@ -1,5 +1,6 @@
 // Scene regression (SPEC §10): every shipped scene carries an `expected` block, and a run without rendering passes
-// it (`octocut run --check`). `octocut run SCENE --regenerate` rewrites a block deliberately.
+// it (`octocut run --check`). `octocut run SCENE --regenerate` rewrites a block deliberately. The same run's report
+// says which subsystems were built, which must be exactly those the scene uses.
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -27,6 +28,25 @@ TEST_P(SceneRegression, PassesItsExpectedBlock) {
   fs::remove_all(out);
   const auto r = test::run_octocut("run '" + scene.string() + "' --no-render --quiet --check --out '" + out.string() + "'");
   EXPECT_EQ(r.exit_code, 0) << r.output;
+
+  // Subsystems: nothing built that the scene does not use. With --no-render there is no renderer and no frame
+  // writer; the cut index exists exactly when a tool has cut events; M comes from a box, or for a mesh surface from
+  // the cache or the mesher; contact is not built.
+  std::ifstream report_file(out / "report.json");
+  const nlohmann::json report = nlohmann::json::parse(report_file);
+  const nlohmann::json& sub = report.at("subsystems");
+  bool cuts = false;
+  for (const auto& tool : j.value("tools", nlohmann::json::array())) cuts = cuts || !tool.value("cuts", nlohmann::json::array()).empty();
+  const bool box = j.at("object").at("surface").contains("box");
+  EXPECT_EQ(sub.at("renderer"), false);
+  EXPECT_EQ(sub.at("frame_writer"), false);
+  EXPECT_EQ(sub.at("contact"), false);
+  EXPECT_EQ(sub.at("cut_index"), cuts) << scene;
+  if (box) {
+    EXPECT_EQ(sub.at("material_graph"), "box") << scene;
+  } else {
+    EXPECT_TRUE(sub.at("material_graph") == "cache" || sub.at("material_graph") == "meshed") << sub.dump();
+  }
   fs::remove_all(out);
 }
 

@@ -1,0 +1,209 @@
+// Tests of engine::World, the running scene: its timeline, cuts on and off the timeline, tools held by a person, an
+// object cut away entirely, bad input, the subsystems it builds, and agreement with `octocut run`'s loop. Volumes are
+// checked against the exact volume of a polygonal punch through an undeformed box.
+#include "octocut/engine/run/world.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+#include <string>
+
+#include "common/shapes.hpp"
+#include "common/temp_dir.hpp"
+#include "octocut/engine/io/mesh_io.hpp"
+#include "octocut/engine/run/run.hpp"
+#include "octocut/engine/scene/scene_loader.hpp"
+#include "octocut/sim/primitives.hpp"
+
+namespace octocut::engine {
+namespace {
+
+namespace fs = std::filesystem;
+using sim::Vec3;
+
+// A 1 cm cube held at its bottom, no gravity (it stays at rest, so that rest and world space agree), a 2 mm punch
+// through its centre at t = 5 ms, and a second tool without cut events far away.
+const char* kCube = R"({
+  "name": "world cube", "duration": 0.01,
+  "solver": {"dt": 0.001, "gravity": [0, 0, 0], "threads": 2},
+  "object": {"surface": {"box": {"min": [0, 0, 0], "max": [0.01, 0.01, 0.01]}},
+             "material": {"young_modulus": 5e4, "poisson_ratio": 0.45},
+             "octree": {"root": {"min": [-0.001, -0.001, -0.001], "size": 0.012}, "base_level": 3, "max_level": 5},
+             "material_graph": {"cell_size": 0.001},
+             "handles": [{"box": {"min": [-1, -1, -1], "max": [1, 1, 0.0005]}}]},
+  "probes": [{"name": "top", "point": [0.0015, 0.0015, 0.0095]}],
+  "tools": [
+    {"name": "punch", "blade": {"cylinder": {"radius": 0.002, "height": 0.02, "segments": 32}},
+     "keyframes": [{"t": 0, "position": [0.005, 0.005, 0.005]}], "cuts": [{"t": 0.005}]},
+    {"name": "hand", "blade": {"cylinder": {"radius": 0.001, "height": 0.02, "segments": 16}},
+     "keyframes": [{"t": 0, "position": [0.05, 0.05, 0.05]}, {"t": 0.01, "position": [0.06, 0.05, 0.05]}]}
+  ]
+})";
+
+class WorldTest : public test::TempDirTest {
+ protected:
+  Scene scene(const std::string& text, const std::vector<std::string>& sets = {}) {
+    return load_scene(write("scene.json", text).string(), sets);
+  }
+};
+
+// The exact volume a regular n-gon prism of circumradius r removes from the 1 cm cube it goes through, m^3.
+double punch_volume(double r, int n) { return test::prism_area(r, n) * 0.01; }
+
+TEST_F(WorldTest, StepsToTheDurationAndRunsTheTimelinesCutOnTime) {
+  World world(scene(kCube), WorldOptions{.render = false});
+  EXPECT_EQ(world.total_steps(), 10);
+  EXPECT_EQ(world.steps(), 0);
+  EXPECT_DOUBLE_EQ(world.time(), 0.0);
+  int cut_step = -1;
+  while (!world.done()) {
+    const StepResult r = world.step();
+    EXPECT_NEAR(r.t, world.time(), 0.0);
+    if (!r.cuts.empty()) {
+      EXPECT_EQ(cut_step, -1) << "one cut event, one step";
+      cut_step = int(world.steps());
+      ASSERT_EQ(r.cuts.size(), 1u);
+      EXPECT_EQ(r.cuts[0].status, "ok") << r.cuts[0].reason;
+      EXPECT_TRUE(r.cuts[0].scheduled);
+      EXPECT_DOUBLE_EQ(r.cuts[0].t, 0.005);
+    }
+  }
+  EXPECT_EQ(cut_step, 5);  // the step that reaches t = 5 ms
+  EXPECT_NEAR(world.time(), 0.01, 1e-12);
+  EXPECT_EQ(world.steps(), 10);
+
+  const Report report = world.report();
+  ASSERT_EQ(report.cuts.size(), 1u);
+  EXPECT_NEAR(report.cuts[0].removed_volume_m3, punch_volume(0.002, 32), 1e-9 * punch_volume(0.002, 32));
+  EXPECT_EQ(report.steps, 10);
+  EXPECT_TRUE(report.finite);
+  EXPECT_EQ(report.failed_steps, 0);
+  EXPECT_NEAR(report.rest_volume_m3, 1e-6 - punch_volume(0.002, 32), 1e-15);
+  EXPECT_EQ(report.surface_genus, 1);  // the punch went through
+  EXPECT_TRUE(report.subsystems.cut_index);
+  EXPECT_EQ(report.subsystems.material_graph, "box");
+  EXPECT_FALSE(report.subsystems.renderer);
+  EXPECT_FALSE(report.subsystems.contact);
+}
+
+TEST_F(WorldTest, CutNowCutsWhereAPersonHoldsTheTool) {
+  // Only the hand tool: no cut events, so no cut index until the first cut.
+  World world(scene(kCube, {"/tools/0/cuts=[]"}), WorldOptions{.render = false});
+  EXPECT_FALSE(world.report().subsystems.cut_index);
+  const std::size_t hand = *world.tool_index("hand");
+  EXPECT_EQ(hand, 1u);
+  EXPECT_FALSE(world.tool_index("nobody").has_value());
+
+  // Keyframes first: halfway between its two keyframes at t = 5 ms.
+  for (int i = 0; i < 5; ++i) world.step();
+  EXPECT_TRUE(world.tool_pose(hand).position.isApprox(Vec3(0.055, 0.05, 0.05), 1e-12));
+  // Where it is now, far from the cube, it cuts nothing.
+  EXPECT_EQ(world.cut_now(hand).status, "no-op");
+
+  // Held through the cube: the cut removes exactly the prism, and is not on the timeline.
+  sim::Pose held;
+  held.position = Vec3(0.003, 0.004, 0.005);
+  world.set_tool_pose(hand, held);
+  world.step();  // a held tool stays where it is held
+  EXPECT_TRUE(world.tool_pose(hand).position.isApprox(held.position, 0.0));
+  const CutSummary cut = world.cut_now(hand);
+  EXPECT_EQ(cut.status, "ok") << cut.reason;
+  EXPECT_FALSE(cut.scheduled);
+  EXPECT_EQ(cut.tool, "hand");
+  EXPECT_DOUBLE_EQ(cut.t, world.time());
+  EXPECT_NEAR(cut.removed_volume_m3, punch_volume(0.001, 16), 1e-9 * punch_volume(0.001, 16));
+  const Report report = world.report();
+  EXPECT_TRUE(report.subsystems.cut_index);
+  ASSERT_EQ(report.cuts.size(), 2u);
+  EXPECT_NEAR(report.rest_volume_m3, 1e-6 - punch_volume(0.001, 16), 1e-15);
+
+  // Released, it follows its keyframes again.
+  world.release_tool(hand);
+  EXPECT_TRUE(world.tool_pose(hand).position.isApprox(Vec3(0.056, 0.05, 0.05), 1e-12));
+  EXPECT_THROW(world.cut_now(7), std::out_of_range);
+  EXPECT_THROW(world.set_tool_pose(7, held), std::out_of_range);
+}
+
+TEST_F(WorldTest, AnObjectCutAwayEntirelyKeepsTimeRunning) {
+  // A punch wider than the cube removes everything at t = 5 ms.
+  World world(scene(kCube, {"/tools/0/blade/cylinder/radius=0.02", "/tools/0/blade/cylinder/height=0.05"}),
+              WorldOptions{.render = false});
+  while (!world.done()) world.step();
+  EXPECT_TRUE(world.object_removed());
+  EXPECT_NEAR(world.time(), 0.01, 1e-12);
+  EXPECT_TRUE(world.deformed_vertices().empty());
+  const Report report = world.report();
+  EXPECT_TRUE(report.object_removed);
+  EXPECT_EQ(report.elements, 0);
+  EXPECT_EQ(report.dofs, 0);
+  EXPECT_DOUBLE_EQ(report.kinetic_j, 0.0);
+  EXPECT_NEAR(report.sim_time_s, 0.01, 1e-12);
+  ASSERT_EQ(report.probes.size(), 1u);
+  EXPECT_TRUE(std::isnan(report.probes[0].displacement[0]));
+}
+
+TEST_F(WorldTest, BadInputThrowsSceneErrorBeforeAnyOutput) {
+  const fs::path out = m_dir / "out";
+  try {
+    World world(scene(kCube, {"/probes/0/point=[0.5,0.5,0.5]"}), WorldOptions{.render = false});
+    FAIL() << "no error";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("/probes/0/point: outside the object's material"), std::string::npos)
+        << e.what();
+  }
+  // An open blade mesh of a tool with cut events is found while building, naming the tool's pointer.
+  sim::TriMesh open = sim::cylinder_mesh(0.002, 0.02, 16);
+  open.triangles.pop_back();
+  save_mesh(m_dir / "open.off", open);
+  const Scene bad_blade = scene(kCube, {"/tools/0/blade=\"open.off\""});
+  try {
+    World world(bad_blade, WorldOptions{.render = false});
+    FAIL() << "no error";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("/tools/0/blade"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(out));
+}
+
+TEST_F(WorldTest, RenderSceneNeedsAWorldThatDraws) {
+  World world(scene(kCube), WorldOptions{.render = false});
+  EXPECT_FALSE(world.renders());
+  EXPECT_THROW((void)world.render_scene(), std::logic_error);
+  // render.enabled with drawing asked for: the scene holds the tissue and is GL-free (no renderer is started).
+  World drawn(scene(kCube, {"/render/enabled=true"}), WorldOptions{.render = true});
+  EXPECT_TRUE(drawn.renders());
+  const RenderScene rs = drawn.render_scene();
+  ASSERT_FALSE(rs.meshes.empty());
+  EXPECT_GT(rs.meshes[0].triangles.size(), 12u);  // the box drawn as a grid of its faces
+  EXPECT_FALSE(drawn.report().subsystems.renderer);
+}
+
+TEST_F(WorldTest, RunSceneIsTheSameLoopOverWorld) {
+  // octocut run's report and a bare World loop agree on everything but timings.
+  const Scene s = scene(kCube);
+  RunOptions o;
+  o.out_dir = (m_dir / "run").string();
+  o.no_render = true;
+  const RunResult r = run_scene(s, o);
+  ASSERT_EQ(r.exit_code, 0) << r.error;
+  EXPECT_TRUE(r.report_written);
+  World world(s, WorldOptions{.render = false});
+  while (!world.done()) world.step();
+  const Report report = world.report();
+  ASSERT_EQ(r.cuts.size(), report.cuts.size());
+  for (std::size_t i = 0; i < r.cuts.size(); ++i) {
+    EXPECT_EQ(r.cuts[i].status, report.cuts[i].status);
+    EXPECT_EQ(r.cuts[i].removed_volume_m3, report.cuts[i].removed_volume_m3);
+    EXPECT_EQ(r.cuts[i].elements_after, report.cuts[i].elements_after);
+  }
+  std::ifstream in(r.report_path);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("\"subsystems\""), std::string::npos);
+  EXPECT_NE(text.find("\"octocut_version\""), std::string::npos);
+}
+
+}  // namespace
+}  // namespace octocut::engine

@@ -14,7 +14,7 @@ fail() { echo "install test FAILED: $*" >&2; exit 1; }
 echo "== cmake --install $build --prefix $prefix"
 cmake --install "$build" --prefix "$prefix" >"$tmp/install.log" || { cat "$tmp/install.log"; fail "cmake --install"; }
 for f in bin/octocut include/octocut/version.hpp include/octocut/sim/simulator.hpp include/octocut/cutting/cutting.hpp \
-         include/octocut/engine/scene_loader.hpp; do
+         include/octocut/engine/scene/scene_loader.hpp include/octocut/engine/run/world.hpp; do
   [ -f "$prefix/$f" ] || fail "$f not installed"
 done
 config=$(find "$prefix" -name octocutConfig.cmake)

@@ -64,12 +64,12 @@ std::vector<sim::TriMesh> load_render_props(const Scene& scene) {
   return meshes;
 }
 
-SceneObject build_scene_object(const Scene& scene) {
+SceneObject build_scene_object(const Scene& scene, bool cuttable) {
   step_count(scene);
   const ObjectSettings& o = scene.object;
   SceneObject out;
   std::shared_ptr<const sim::MaterialSource> material;
-  if (o.surface_is_box && scene_cuts(scene)) {
+  if (o.surface_is_box && (cuttable || scene_cuts(scene))) {
     // A box that tools cut: S as a welded grid and M as a Kuhn tet grid at the cell size, whose material is
     // exactly the box.
     const sim::Box3 box = box3(o.surface_box);

@@ -118,7 +118,7 @@ World::Impl::Impl(const Scene& s, const WorldOptions& o)
     : scene(s), options(o), rendering(s.render.enabled && o.render), total_steps(step_count(s)),
       surface_exec(s.solver.threads) {
   // Everything that is bad input is found here, before any output: the object, the props, the blades.
-  SceneObject built = build_scene_object(scene);
+  SceneObject built = build_scene_object(scene, o.cuttable);
   warnings = std::move(built.warnings);
   graph_source = built.graph_source;
   if (rendering) load_props();
@@ -130,9 +130,9 @@ World::Impl::Impl(const Scene& s, const WorldOptions& o)
   object.cut_faces.assign(object.surface.triangles.size(), 0);
   object.graph = built.graph;
   object.surface_checked = true;
-  // The grid that finds S's faces near a blade, only for a scene that cuts (O(|S|), once); cut_now builds it on
-  // the first cut otherwise.
-  if (!events.empty()) cutting::index_surface(object);
+  // The grid that finds S's faces near a blade, only for a world that cuts (O(|S|), once); otherwise the first
+  // cut_now builds it.
+  if (!events.empty() || o.cuttable) cutting::index_surface(object);
   cut_options = engine::cut_options(scene.cutting);
 
   sim = std::make_unique<sim::Simulator>(std::move(built.model), simulator_options(scene));

@@ -90,9 +90,20 @@ TEST_F(WorldTest, StepsToTheDurationAndRunsTheTimelinesCutOnTime) {
 }
 
 TEST_F(WorldTest, CutNowCutsWhereAPersonHoldsTheTool) {
-  // Only the hand tool: no cut events, so no cut index until the first cut.
-  World world(scene(kCube, {"/tools/0/cuts=[]"}), WorldOptions{.render = false});
-  EXPECT_FALSE(world.report().subsystems.cut_index);
+  // No cut events: a box primitive has no material graph, so it cannot be cut, and nothing for cuts is built.
+  {
+    World plain(scene(kCube, {"/tools/0/cuts=[]"}), WorldOptions{.render = false});
+    EXPECT_FALSE(plain.report().subsystems.cut_index);
+    sim::Pose through;
+    through.position = Vec3(0.005, 0.005, 0.005);
+    plain.set_tool_pose(1, through);
+    const CutSummary refused = plain.cut_now(1);
+    EXPECT_EQ(refused.status, "skipped");
+    EXPECT_NE(refused.reason.find("material graph"), std::string::npos) << refused.reason;
+  }
+  // Cuttable (a viewer's tool in the hand): M and the index are there from the start.
+  World world(scene(kCube, {"/tools/0/cuts=[]"}), WorldOptions{.render = false, .cuttable = true});
+  EXPECT_TRUE(world.report().subsystems.cut_index);
   const std::size_t hand = *world.tool_index("hand");
   EXPECT_EQ(hand, 1u);
   EXPECT_FALSE(world.tool_index("nobody").has_value());

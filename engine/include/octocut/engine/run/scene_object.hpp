@@ -44,11 +44,12 @@ struct SceneObject {
 bool scene_cuts(const Scene& scene);
 
 /// Builds the object of a scene. A mesh surface is loaded (assimp), validated, scaled to metres, and meshed into M
-/// (CGAL Mesh_3, cached on disk); a box surface is an exact box material (a Kuhn tet grid when tools cut it). Then
+/// (CGAL Mesh_3, cached on disk); a box surface is an exact box material, or a Kuhn tet grid of it when it is to be
+/// cut (`cuttable`, or a tool has cut events), since a cut needs M. Then
 /// the octree: root given, or the bounding box of S made cubic and grown by 5%; base level, refine regions, handles.
 /// Throws SceneError naming the file and JSON pointer for inputs that only fail once built (a bad mesh file, a probe
 /// outside the material).
-SceneObject build_scene_object(const Scene& scene);
+SceneObject build_scene_object(const Scene& scene, bool cuttable = false);
 
 /// Loads and validates the render props' meshes (`render.props`), scaled to metres, in order. Throws SceneError naming
 /// the file and `/render/props/<i>/mesh` for a bad mesh.

@@ -32,6 +32,9 @@ struct WorldOptions {
   /// Build what drawing needs (render props' and tools' meshes, the camera) when the scene has `render.enabled`.
   /// False for `--no-render`, benchmarks and studies: render_scene() then throws.
   bool render = true;
+  /// Build what cuts need even when no tool has cut events on the timeline: a material graph for a box primitive,
+  /// and the index over S from the start. Set it when tools will be cut with by hand (cut_now in a viewer).
+  bool cuttable = false;
 };
 
 /// What one World::step() did.
@@ -74,7 +77,9 @@ class World {
   [[nodiscard]] bool done() const;
 
   /// Cuts now with tool `tool`'s blade where the tool is now (its keyframes, or the pose set by set_tool_pose): a cut
-  /// event that is not on the timeline. The cut is reported like any other. Throws std::out_of_range for a bad index;
+  /// event that is not on the timeline. The cut is reported like any other. A box primitive can only be cut when it
+  /// has a material graph (WorldOptions::cuttable, or cut events on the timeline); otherwise the cut is skipped with
+  /// that reason. Throws std::out_of_range for a bad index;
   /// SceneError when the tool's blade file is bad (blades of tools without cut events load on their first cut).
   CutSummary cut_now(std::size_t tool);
   /// Overrides the keyframes of tool `tool` with `pose` (tool coordinates to world) from now on: a tool that a

@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include "octocut/engine/run/world.hpp"
+#include "octocut/engine/scene/scene_loader.hpp"
 #include "scene/scene_schema.hpp"
 
 namespace octocut::engine {
@@ -24,38 +25,34 @@ constexpr double kMaxSlackMs = 1000.0;
   throw std::invalid_argument(file + ": " + (pointer.empty() ? std::string("/") : pointer) + ": " + what);
 }
 
-const json& member(const json& object, const char* key, const std::string& file, const std::string& at) {
-  const auto it = object.find(key);
-  if (it == object.end()) bad(file, at, std::string("missing key '") + key + "'");
-  return *it;
-}
-
-void only_keys(const json& object, std::initializer_list<const char*> keys, const std::string& file,
-               const std::string& at) {
-  for (const auto& [k, v] : object.items()) {
-    bool known = false;
-    for (const char* key : keys) known = known || k == key;
-    if (!known) bad(file, join_pointer(at, k), "unknown key");
-  }
-}
-
-double number(const json& value, const std::string& file, const std::string& at, double lo, double hi,
-              bool lo_open) {
-  if (!value.is_number()) bad(file, at, "expected a number");
-  const double x = value.get<double>();
-  if (!std::isfinite(x)) bad(file, at, "not finite");
-  if ((lo_open ? x <= lo : x < lo) || x > hi) {
-    char range[96];
-    std::snprintf(range, sizeof range, "out of range: %g (allowed %s%g, %g])", x, lo_open ? "(" : "[", lo, hi);
-    bad(file, at, range);
-  }
-  return x;
-}
-
-bool is_stage(const std::string& s) {
-  for (const char* k : kCutStageKeys)
-    if (s == k) return true;
-  return false;
+// The format of a baseline file, in the scene schema's terms (one validator for every input document).
+const schema::Entry& baseline_schema() {
+  using namespace schema;
+  static const Entry entry = [] {
+    std::vector<std::string> stages(kCutStageKeys.begin(), kCutStageKeys.end());
+    Entry benchmarks = object_array(
+        "benchmarks",
+        {required(string("name", "The cut benchmark, \"cut/<scene>\".")),
+         required(integer("cuts_ok", std::nullopt, closed(1, 1e9), "Ok cuts the medians are taken over.")),
+         required(number_map("ms", stages, closed(0, 1e9), 1, "Median ms of each stage on the baseline machine."))},
+        "The benchmarks and their stage medians.");
+    benchmarks = required(benchmarks);
+    benchmarks.min_items = 1;
+    return object(
+        "",
+        {required(choice("schema", {kSchema}, kSchema, "The format.")),
+         required(object("machine",
+                         {optional(string("cpu", "The CPU model.")),
+                          optional(integer("threads", std::nullopt, closed(0, 1e6), "Hardware threads.")),
+                          required(number("calibration_ms", std::nullopt, open_closed(0, 1e6),
+                                          "The calibration kernel's median on the baseline machine, ms."))},
+                         "The machine the baseline was taken on.")),
+         required(number("tolerance", std::nullopt, closed(0, kMaxTolerance), "Relative allowance.")),
+         required(number("slack_ms", std::nullopt, closed(0, kMaxSlackMs), "Absolute allowance, ms.")),
+         benchmarks},
+        "A cut-timing baseline.");
+  }();
+  return entry;
 }
 
 // The bench document's calibration, ms.
@@ -85,52 +82,29 @@ CutBaseline parse_cut_baseline(const std::string& text, const std::string& file)
   } catch (const json::parse_error& e) {
     throw std::invalid_argument(file + ": not JSON: " + e.what());
   }
-  if (!doc.is_object()) bad(file, "", "expected an object");
-  only_keys(doc, {"schema", "machine", "tolerance", "slack_ms", "benchmarks"}, file, "");
-  const json& schema_value = member(doc, "schema", file, "");
-  if (!schema_value.is_string() || schema_value.get<std::string>() != kSchema)
-    bad(file, "/schema", std::string("expected \"") + kSchema + "\"");
-
-  CutBaseline b;
-  const json& machine = member(doc, "machine", file, "");
-  if (!machine.is_object()) bad(file, "/machine", "expected an object");
-  only_keys(machine, {"cpu", "threads", "calibration_ms"}, file, "/machine");
-  if (machine.contains("cpu")) {
-    if (!machine["cpu"].is_string()) bad(file, "/machine/cpu", "expected a string");
-    b.cpu = machine["cpu"].get<std::string>();
+  // The document's shape, by the schema validator; then what the schema cannot say.
+  nlohmann::json checked = nlohmann::json::parse(text);
+  try {
+    if (!checked.is_object()) schema::fail(file, "/", "expected an object");
+    schema::validate(checked, baseline_schema(), "", file);
+  } catch (const SceneError& e) {
+    throw std::invalid_argument(e.what());
   }
-  if (machine.contains("threads")) number(machine["threads"], file, "/machine/threads", 0, 1e6, false);
-  b.calibration_ms =
-      number(member(machine, "calibration_ms", file, "/machine"), file, "/machine/calibration_ms", 0.0, 1e6, true);
-  b.tolerance = number(member(doc, "tolerance", file, ""), file, "/tolerance", 0.0, kMaxTolerance, false);
-  b.slack_ms = number(member(doc, "slack_ms", file, ""), file, "/slack_ms", 0.0, kMaxSlackMs, false);
-
-  const json& list = member(doc, "benchmarks", file, "");
-  if (!list.is_array()) bad(file, "/benchmarks", "expected an array");
-  if (list.empty()) bad(file, "/benchmarks", "no benchmark to compare");
+  CutBaseline b;
+  b.cpu = doc["machine"].value("cpu", std::string());
+  b.calibration_ms = doc["machine"]["calibration_ms"].get<double>();
+  b.tolerance = doc["tolerance"].get<double>();
+  b.slack_ms = doc["slack_ms"].get<double>();
   std::set<std::string> names;
-  for (std::size_t i = 0; i < list.size(); ++i) {
+  for (std::size_t i = 0; i < doc["benchmarks"].size(); ++i) {
+    const json& e = doc["benchmarks"][i];
     const std::string at = join_pointer("/benchmarks", i);
-    const json& e = list[i];
-    if (!e.is_object()) bad(file, at, "expected an object");
-    only_keys(e, {"name", "cuts_ok", "ms"}, file, at);
     CutBaseline::Benchmark bm;
-    const json& name = member(e, "name", file, at);
-    if (!name.is_string() || !name.get<std::string>().starts_with("cut/"))
-      bad(file, at + "/name", "expected the name of a cut benchmark (\"cut/...\")");
-    bm.name = name.get<std::string>();
+    bm.name = e["name"].get<std::string>();
+    if (!bm.name.starts_with("cut/")) bad(file, at + "/name", "expected the name of a cut benchmark (\"cut/...\")");
     if (!names.insert(bm.name).second) bad(file, at + "/name", "benchmark '" + bm.name + "' listed twice");
-    const double ok = number(member(e, "cuts_ok", file, at), file, at + "/cuts_ok", 1.0, 1e9, false);
-    if (ok != std::floor(ok)) bad(file, at + "/cuts_ok", "expected an integer");
-    bm.cuts_ok = static_cast<long>(ok);
-    const json& ms = member(e, "ms", file, at);
-    if (!ms.is_object()) bad(file, at + "/ms", "expected an object");
-    if (ms.empty()) bad(file, at + "/ms", "no stage to compare");
-    for (const auto& [stage, value] : ms.items()) {
-      const std::string sat = join_pointer(at + "/ms", stage);
-      if (!is_stage(stage)) bad(file, sat, "unknown stage (expected one of SPEC §8 cuts[].ms)");
-      bm.stages.push_back({stage, number(value, file, sat, 0.0, 1e9, false)});
-    }
+    bm.cuts_ok = static_cast<long>(checked["benchmarks"][i]["cuts_ok"].get<std::int64_t>());
+    for (const auto& [stage, value] : e["ms"].items()) bm.stages.push_back({stage, value.get<double>()});
     b.benchmarks.push_back(std::move(bm));
   }
   return b;

@@ -14,7 +14,6 @@
 
 namespace octocut::engine {
 namespace schema {
-namespace {
 
 using nlohmann::json;
 
@@ -116,6 +115,17 @@ Entry optional(Entry entry) {
   entry.default_value.reset();
   return entry;
 }
+
+/// An object of numbers in `range` whose keys are among `keys`, with at least `min_items` of them.
+Entry number_map(std::string key, std::vector<std::string> keys, Range range, std::size_t min_items, std::string doc) {
+  Entry entry = make_entry(std::move(key), Type::number_map, std::move(doc));
+  entry.choices = std::move(keys);
+  entry.range = range;
+  entry.min_items = min_items;
+  return entry;
+}
+
+namespace {
 
 /// A required axis-aligned box `{"min": [3], "max": [3]}` in metres; the loader checks max > min.
 Entry box(std::string key, std::string doc) {
@@ -478,6 +488,8 @@ std::string type_text(const Entry& entry) {
       return "string (mesh path) or object";
     case Type::checks:
       return "object (JSON pointer → check)";
+    case Type::number_map:
+      return "object of numbers";
   }
   return "";
 }
@@ -574,6 +586,24 @@ void validate(json& value, const Entry& entry, const std::string& pointer, const
       }
       validate_object(value, entry.children, pointer, file);
       return;
+    case Type::number_map: {
+      if (!value.is_object()) fail(file, pointer, std::string("expected an object, got ") + value.type_name());
+      if (value.size() < entry.min_items)
+        fail(file, pointer, "must have at least " + std::to_string(entry.min_items) + " key(s), got " +
+                                std::to_string(value.size()));
+      for (const auto& item : value.items()) {
+        const std::string at = join_pointer(pointer, item.key());
+        std::string allowed;
+        bool known = false;
+        for (const std::string& k : entry.choices) {
+          known = known || k == item.key();
+          allowed += (allowed.empty() ? "" : ", ") + k;
+        }
+        if (!known) fail(file, at, "unknown key (expected one of " + allowed + ")");
+        validate_number(item.value(), entry.range, at, file);
+      }
+      return;
+    }
     case Type::checks:
       if (!value.is_object()) {
         fail(file, pointer, std::string("expected an object (JSON pointer -> check), got ") + value.type_name());

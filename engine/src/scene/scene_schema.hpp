@@ -1,6 +1,7 @@
 #pragma once
 // Private to the engine: the scene schema as data (one Entry per key), the validator that checks a parsed document
 // against it and fills in defaults, and the message helpers shared with the loader.
+#include <array>
 #include <cstddef>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -21,6 +22,7 @@ enum class Type {
   object_array,  ///< an array of objects whose keys are `children`
   box_or_path,   ///< a mesh path (string), or an object whose keys are `children`
   checks,        ///< a free-form object: JSON pointer into report.json -> check (the `expected` block, expected.hpp)
+  number_map,    ///< an object of finite numbers in `range`, its keys among `choices`, at least `min_items` of them
 };
 
 /// Bounds on a number or integer. Each bound is optional and inclusive unless marked exclusive.
@@ -45,6 +47,36 @@ struct Entry {
   std::size_t min_items = 0;                    ///< object_array: fewest items allowed
   std::vector<Entry> children;  ///< object keys; keys of each object_array item; box_or_path's object form
 };
+
+// ---- building schemas (the scene's, and other documents' such as the cut-timing baseline) ---------------------------
+
+Range make_range(std::optional<double> min, bool min_exclusive, std::optional<double> max, bool max_exclusive);
+Range greater_than(double min);                ///< (min, inf)
+Range at_least(double min);                    ///< [min, inf)
+Range closed(double min, double max);          ///< [min, max]
+Range open_closed(double min, double max);     ///< (min, max]
+Range open(double min, double max);            ///< (min, max)
+Range closed_open(double min, double max);     ///< [min, max)
+
+Entry make_entry(std::string key, Type type, std::string doc);
+Entry number(std::string key, std::optional<double> default_value, Range range, std::string doc);
+Entry integer(std::string key, std::optional<long long> default_value, Range range, std::string doc);
+Entry boolean(std::string key, bool default_value, std::string doc);
+Entry string(std::string key, std::string doc);
+Entry choice(std::string key, std::vector<std::string> choices, std::string default_value, std::string doc);
+Entry vec3(std::string key, std::optional<std::array<double, 3>> default_value, std::string doc);
+/// An object that defaults to `{}`, so that its own children's defaults get filled in.
+Entry object(std::string key, std::vector<Entry> children, std::string doc);
+/// An array of objects that defaults to `[]`; `item` lists the keys of each element.
+Entry object_array(std::string key, std::vector<Entry> item, std::string doc);
+/// A mesh path or an object with the keys `children`.
+Entry box_or_path(std::string key, std::vector<Entry> children, std::string doc);
+/// An object of numbers in `range` whose keys are among `keys`, with at least `min_items` of them.
+Entry number_map(std::string key, std::vector<std::string> keys, Range range, std::size_t min_items, std::string doc);
+/// The entry, required: absence is an error, and it has no default.
+Entry required(Entry entry);
+/// An optional key with no default: when absent it stays absent.
+Entry optional(Entry entry);
 
 /// Returns the schema of a whole scene document: an object entry with an empty key.
 const Entry& scene_schema();

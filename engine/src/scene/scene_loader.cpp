@@ -261,6 +261,24 @@ std::string resolve_mesh(const json& value, const std::string& pointer, const st
   return resolved.string();
 }
 
+/// Checks that keyframe time `t` at `pointer` (of keyframe k > 0) follows the previous keyframe's `previous`.
+void check_increasing(double t, double previous, const std::string& pointer, const std::string& file) {
+  if (!(t > previous))
+    fail(file, pointer, "must be > the previous keyframe's t (" + format_number(previous) + "), got " + format_number(t));
+}
+
+/// Reads the pose keyframes (`t`, `position`, `rotation_deg`) at `pointer`, checking that their times increase.
+std::vector<PoseKey> to_pose_keys(const json& keyframes, const std::string& pointer, const std::string& file) {
+  std::vector<PoseKey> out;
+  for (std::size_t k = 0; k < keyframes.size(); ++k) {
+    const json& keyframe = keyframes[k];
+    PoseKey frame{keyframe["t"].get<double>(), to_vec3(keyframe["position"]), to_vec3(keyframe["rotation_deg"])};
+    if (k > 0) check_increasing(frame.t, out.back().t, pointer + "/" + std::to_string(k) + "/t", file);
+    out.push_back(frame);
+  }
+  return out;
+}
+
 /// Reads `tools[]`: names unique and not empty, mesh files present, keyframe and cut times strictly increasing (a
 /// cut after the duration is allowed; the run reports that it never happened).
 std::vector<ToolSettings> to_tools(const json& tools, const std::string& file) {
@@ -290,16 +308,7 @@ std::vector<ToolSettings> to_tools(const json& tools, const std::string& file) {
     entry.collide = tool["collide"].get<bool>();
 
     // Keyframes: strictly increasing times (the schema asks for at least one).
-    for (std::size_t k = 0; k < tool["keyframes"].size(); ++k) {
-      const json& keyframe = tool["keyframes"][k];
-      ToolKeyframe frame{keyframe["t"].get<double>(), to_vec3(keyframe["position"]), to_vec3(keyframe["rotation_deg"])};
-      if (k > 0 && !(frame.t > entry.keyframes.back().t)) {
-        fail(file, pointer + "/keyframes/" + std::to_string(k) + "/t",
-             "must be > the previous keyframe's t (" + format_number(entry.keyframes.back().t) + "), got " +
-                 format_number(frame.t));
-      }
-      entry.keyframes.push_back(frame);
-    }
+    entry.keyframes = to_pose_keys(tool["keyframes"], pointer + "/keyframes", file);
 
     // Cuts: strictly increasing times.
     for (std::size_t k = 0; k < tool["cuts"].size(); ++k) {
@@ -318,57 +327,23 @@ std::vector<ToolSettings> to_tools(const json& tools, const std::string& file) {
   return out;
 }
 
-/// Converts a validated document with defaults filled in to a Scene, checking the rules that span several keys.
-Scene to_scene(const json& document, const std::string& file) {
-  Scene scene;
-  scene.file = file;
+/// Reads `solver`.
+SolverSettings to_solver(const json& solver) {
+  SolverSettings s;
+  s.mode = solver["mode"].get<std::string>();
+  s.dt = solver["dt"].get<double>();
+  s.gravity = to_vec3(solver["gravity"]);
+  s.linear_solver = solver["linear_solver"].get<std::string>();
+  s.tolerance = solver["tolerance"].get<double>();
+  s.max_iterations = solver["max_iterations"].get<int>();
+  s.threads = solver["threads"].get<int>();
+  s.max_speed = solver["max_speed"].get<double>();
+  return s;
+}
 
-  // Top level; the name defaults to the file stem.
-  scene.name =
-      document.contains("name") ? document["name"].get<std::string>() : std::filesystem::path(file).stem().string();
-  scene.duration = document["duration"].get<double>();
-  scene.seed = document["seed"].get<std::uint64_t>();
-
-  // Solver.
-  const json& solver = document["solver"];
-  scene.solver.mode = solver["mode"].get<std::string>();
-  scene.solver.dt = solver["dt"].get<double>();
-  scene.solver.gravity = to_vec3(solver["gravity"]);
-  scene.solver.linear_solver = solver["linear_solver"].get<std::string>();
-  scene.solver.tolerance = solver["tolerance"].get<double>();
-  scene.solver.max_iterations = solver["max_iterations"].get<int>();
-  scene.solver.threads = solver["threads"].get<int>();
-  scene.solver.max_speed = solver["max_speed"].get<double>();
-
-  // Object surface: a box, or a mesh path resolved against the scene file's directory.
-  const json& object = document["object"];
-  ObjectSettings& settings = scene.object;
-  const json& surface = object["surface"];
-  settings.surface_is_box = surface.is_object();
-  if (settings.surface_is_box) {
-    settings.surface_box = to_box(surface["box"], "/object/surface/box", file);
-  } else {
-    const std::filesystem::path resolved =
-        std::filesystem::absolute(std::filesystem::path(file).parent_path() / surface.get<std::string>())
-            .lexically_normal();
-    if (!std::filesystem::is_regular_file(resolved)) {
-      fail(file, "/object/surface", "file not found: " + resolved.string());
-    }
-    settings.surface_path = resolved.string();
-  }
-  settings.scale = object["scale"].get<double>();
-
-  // Material.
-  const json& material = object["material"];
-  settings.material.young_modulus = material["young_modulus"].get<double>();
-  settings.material.poisson_ratio = material["poisson_ratio"].get<double>();
-  settings.material.density = material["density"].get<double>();
-  settings.material.rayleigh_mass = material["rayleigh_mass"].get<double>();
-  settings.material.rayleigh_stiffness = material["rayleigh_stiffness"].get<double>();
-
-  // Octree: levels must nest (base <= max, refinement regions <= max).
-  const json& octree = object["octree"];
-  OctreeSettings& tree = settings.octree;
+/// Reads `object/octree`: levels must nest (base <= max, refinement regions <= max).
+OctreeSettings to_octree(const json& octree, const std::string& file) {
+  OctreeSettings tree;
   tree.has_root = octree.contains("root");
   if (tree.has_root) {
     tree.root_min = to_vec3(octree["root"]["min"]);
@@ -391,11 +366,14 @@ Scene to_scene(const json& document, const std::string& file) {
     }
     tree.refine.push_back(refine);
   }
-  settings.material_graph_cell_size = object["material_graph"]["cell_size"].get<double>();
+  return tree;
+}
 
-  // Handles: keyframe times strictly increasing.
-  for (std::size_t i = 0; i < object["handles"].size(); ++i) {
-    const json& handle_json = object["handles"][i];
+/// Reads `object/handles`: keyframe times strictly increasing.
+std::vector<Handle> to_handles(const json& handles, const std::string& file) {
+  std::vector<Handle> out;
+  for (std::size_t i = 0; i < handles.size(); ++i) {
+    const json& handle_json = handles[i];
     const std::string pointer = "/object/handles/" + std::to_string(i);
     Handle handle;
     handle.box = to_box(handle_json["box"], pointer + "/box", file);
@@ -403,108 +381,145 @@ Scene to_scene(const json& document, const std::string& file) {
       const json& keyframe = handle_json["keyframes"][k];
       HandleKeyframe frame{keyframe["t"].get<double>(), to_vec3(keyframe["translation"]),
                            to_vec3(keyframe["rotation_deg"])};
-      if (k > 0 && !(frame.t > handle.keyframes.back().t)) {
-        fail(file, pointer + "/keyframes/" + std::to_string(k) + "/t",
-             "must be > the previous keyframe's t (" + format_number(handle.keyframes.back().t) + "), got " +
-                 format_number(frame.t));
-      }
+      if (k > 0)
+        check_increasing(frame.t, handle.keyframes.back().t, pointer + "/keyframes/" + std::to_string(k) + "/t", file);
       handle.keyframes.push_back(frame);
     }
-    settings.handles.push_back(std::move(handle));
+    out.push_back(std::move(handle));
   }
+  return out;
+}
 
-  // Tools and cutting settings.
-  scene.tools = to_tools(document["tools"], file);
-  const json& cutting = document["cutting"];
-  scene.cutting.remove_fragments = cutting["remove_fragments"].get<std::string>();
-  scene.cutting.fragment_volume = cutting["fragment_volume"].get<double>();
-  scene.cutting.verify = cutting["verify"].get<bool>();
+/// Reads `object`: the surface (a box, or a mesh path resolved against the scene file's directory), the material,
+/// the octree, the material graph and the handles.
+ObjectSettings to_object(const json& object, const std::string& file) {
+  ObjectSettings settings;
+  const json& surface = object["surface"];
+  settings.surface_is_box = surface.is_object();
+  if (settings.surface_is_box) {
+    settings.surface_box = to_box(surface["box"], "/object/surface/box", file);
+  } else {
+    settings.surface_path = resolve_mesh(surface, "/object/surface", file);
+  }
+  settings.scale = object["scale"].get<double>();
+  const json& material = object["material"];
+  settings.material.young_modulus = material["young_modulus"].get<double>();
+  settings.material.poisson_ratio = material["poisson_ratio"].get<double>();
+  settings.material.density = material["density"].get<double>();
+  settings.material.rayleigh_mass = material["rayleigh_mass"].get<double>();
+  settings.material.rayleigh_stiffness = material["rayleigh_stiffness"].get<double>();
+  settings.octree = to_octree(object["octree"], file);
+  settings.material_graph_cell_size = object["material_graph"]["cell_size"].get<double>();
+  settings.handles = to_handles(object["handles"], file);
+  return settings;
+}
 
-  // Probes: names unique and not empty.
-  std::set<std::string> probe_names;
-  for (std::size_t i = 0; i < document["probes"].size(); ++i) {
-    const json& probe = document["probes"][i];
+/// Reads `probes`: names unique and not empty.
+std::vector<Probe> to_probes(const json& probes, const std::string& file) {
+  std::vector<Probe> out;
+  std::set<std::string> names;
+  for (std::size_t i = 0; i < probes.size(); ++i) {
+    const json& probe = probes[i];
     const std::string pointer = "/probes/" + std::to_string(i) + "/name";
     Probe entry{probe["name"].get<std::string>(), to_vec3(probe["point"])};
     if (entry.name.empty()) fail(file, pointer, "must not be empty");
-    if (!probe_names.insert(entry.name).second) fail(file, pointer, "duplicate probe name \"" + entry.name + "\"");
-    scene.probes.push_back(std::move(entry));
+    if (!names.insert(entry.name).second) fail(file, pointer, "duplicate probe name \"" + entry.name + "\"");
+    out.push_back(std::move(entry));
   }
+  return out;
+}
 
-  // Render and output.
-  const json& render = document["render"];
-  RenderSettings& r = scene.render;
+/// Reads `render/camera`: it must have a view direction and an up that is not along it.
+CameraSettings to_camera(const json& camera, const std::string& file) {
+  CameraSettings c;
+  c.has_position = camera.contains("position");
+  if (c.has_position) c.position = to_vec3(camera["position"]);
+  c.has_target = camera.contains("target");
+  if (c.has_target) c.target = to_vec3(camera["target"]);
+  c.up = to_vec3(camera["up"]);
+  c.fov_deg = camera["fov_deg"].get<double>();
+  c.arthroscope = camera["arthroscope"].get<bool>();
+  c.mask = camera["mask"].get<bool>();
+  c.follow_tool = camera["follow_tool"].get<std::string>();
+  if (c.has_position && c.has_target && c.position == c.target)
+    fail(file, "/render/camera/target", "must differ from /render/camera/position");
+  const auto& u = c.up;
+  if (u[0] == 0.0 && u[1] == 0.0 && u[2] == 0.0) fail(file, "/render/camera/up", "must not be zero");
+  if (c.has_position && c.has_target) {
+    const std::array<double, 3> f{c.target[0] - c.position[0], c.target[1] - c.position[1],
+                                  c.target[2] - c.position[2]};
+    const std::array<double, 3> x{f[1] * u[2] - f[2] * u[1], f[2] * u[0] - f[0] * u[2], f[0] * u[1] - f[1] * u[0]};
+    const double fn = std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]);
+    const double un = std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+    if (std::sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) <= 1e-9 * fn * un)
+      fail(file, "/render/camera/up", "must not be parallel to the view direction (target - position)");
+  }
+  return c;
+}
+
+/// Reads `render/props`: names unique, mesh files present, keyframe times strictly increasing.
+std::vector<RenderProp> to_props(const json& props, const std::string& file) {
+  std::vector<RenderProp> out;
+  std::set<std::string> names;
+  for (std::size_t i = 0; i < props.size(); ++i) {
+    const json& prop = props[i];
+    const std::string pointer = "/render/props/" + std::to_string(i);
+    RenderProp entry;
+    entry.name = prop["name"].get<std::string>();
+    if (entry.name.empty()) fail(file, pointer + "/name", "must not be empty");
+    if (!names.insert(entry.name).second) fail(file, pointer + "/name", "duplicate prop name \"" + entry.name + "\"");
+    entry.mesh_path = resolve_mesh(prop["mesh"], pointer + "/mesh", file);
+    entry.scale = prop["scale"].get<double>();
+    entry.material = prop["material"].get<std::string>();
+    entry.keyframes = to_pose_keys(prop["keyframes"], pointer + "/keyframes", file);
+    out.push_back(std::move(entry));
+  }
+  return out;
+}
+
+/// Reads `render`; the camera follows a tool of `tools` or, failing that, a prop.
+RenderSettings to_render(const json& render, const std::vector<ToolSettings>& tools, const std::string& file) {
+  RenderSettings r;
   r.enabled = render["enabled"].get<bool>();
   r.width = render["width"].get<int>();
   r.height = render["height"].get<int>();
   r.every = render["every"].get<int>();
   r.msaa = render["msaa"].get<int>();
-  const json& camera = render["camera"];
-  r.camera.has_position = camera.contains("position");
-  if (r.camera.has_position) r.camera.position = to_vec3(camera["position"]);
-  r.camera.has_target = camera.contains("target");
-  if (r.camera.has_target) r.camera.target = to_vec3(camera["target"]);
-  r.camera.up = to_vec3(camera["up"]);
-  r.camera.fov_deg = camera["fov_deg"].get<double>();
-  r.camera.arthroscope = camera["arthroscope"].get<bool>();
-  r.camera.mask = camera["mask"].get<bool>();
-  r.camera.follow_tool = camera["follow_tool"].get<std::string>();
-  // The camera must have a view direction and an up that is not along it; tools do not exist yet.
-  if (r.camera.has_position && r.camera.has_target && r.camera.position == r.camera.target)
-    fail(file, "/render/camera/target", "must differ from /render/camera/position");
-  {
-    const auto& u = r.camera.up;
-    if (u[0] == 0.0 && u[1] == 0.0 && u[2] == 0.0) fail(file, "/render/camera/up", "must not be zero");
-    if (r.camera.has_position && r.camera.has_target) {
-      const std::array<double, 3> f{r.camera.target[0] - r.camera.position[0], r.camera.target[1] - r.camera.position[1],
-                                    r.camera.target[2] - r.camera.position[2]};
-      const std::array<double, 3> c{f[1] * u[2] - f[2] * u[1], f[2] * u[0] - f[0] * u[2], f[0] * u[1] - f[1] * u[0]};
-      const double fn = std::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]);
-      const double un = std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
-      if (std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) <= 1e-9 * fn * un)
-        fail(file, "/render/camera/up", "must not be parallel to the view direction (target - position)");
-    }
-  }
-  // Props: names unique, mesh files present, keyframe times strictly increasing.
-  std::set<std::string> prop_names;
-  for (std::size_t i = 0; i < render["props"].size(); ++i) {
-    const json& prop = render["props"][i];
-    const std::string pointer = "/render/props/" + std::to_string(i);
-    RenderProp entry;
-    entry.name = prop["name"].get<std::string>();
-    if (entry.name.empty()) fail(file, pointer + "/name", "must not be empty");
-    if (!prop_names.insert(entry.name).second) fail(file, pointer + "/name", "duplicate prop name \"" + entry.name + "\"");
-    const std::filesystem::path resolved =
-        std::filesystem::absolute(std::filesystem::path(file).parent_path() / prop["mesh"].get<std::string>())
-            .lexically_normal();
-    if (!std::filesystem::is_regular_file(resolved)) fail(file, pointer + "/mesh", "file not found: " + resolved.string());
-    entry.mesh_path = resolved.string();
-    entry.scale = prop["scale"].get<double>();
-    entry.material = prop["material"].get<std::string>();
-    for (std::size_t k = 0; k < prop["keyframes"].size(); ++k) {
-      const json& keyframe = prop["keyframes"][k];
-      PropKeyframe frame{keyframe["t"].get<double>(), to_vec3(keyframe["position"]), to_vec3(keyframe["rotation_deg"])};
-      if (k > 0 && !(frame.t > entry.keyframes.back().t))
-        fail(file, pointer + "/keyframes/" + std::to_string(k) + "/t",
-             "must be > the previous keyframe's t (" + format_number(entry.keyframes.back().t) + "), got " +
-                 format_number(frame.t));
-      entry.keyframes.push_back(frame);
-    }
-    r.props.push_back(std::move(entry));
-  }
-  // The camera follows a tool or, failing that, a prop.
-  if (!r.camera.follow_tool.empty() && !prop_names.count(r.camera.follow_tool) &&
-      std::none_of(scene.tools.begin(), scene.tools.end(),
-                   [&](const ToolSettings& tool) { return tool.name == r.camera.follow_tool; })) {
-    fail(file, "/render/camera/follow_tool", "no tool or prop named \"" + r.camera.follow_tool + "\"");
+  r.camera = to_camera(render["camera"], file);
+  r.props = to_props(render["props"], file);
+  const std::string& follow = r.camera.follow_tool;
+  if (!follow.empty() &&
+      std::none_of(r.props.begin(), r.props.end(), [&](const RenderProp& p) { return p.name == follow; }) &&
+      std::none_of(tools.begin(), tools.end(), [&](const ToolSettings& tool) { return tool.name == follow; })) {
+    fail(file, "/render/camera/follow_tool", "no tool or prop named \"" + follow + "\"");
   }
   r.overlays.octree = render["overlays"]["octree"].get<bool>();
   r.overlays.dofs = render["overlays"]["dofs"].get<bool>();
   r.overlays.hanging = render["overlays"]["hanging"].get<bool>();
+  return r;
+}
+
+/// Converts a validated document with defaults filled in to a Scene, checking the rules that span several keys.
+Scene to_scene(const json& document, const std::string& file) {
+  Scene scene;
+  scene.file = file;
+  // Top level; the name defaults to the file stem.
+  scene.name =
+      document.contains("name") ? document["name"].get<std::string>() : std::filesystem::path(file).stem().string();
+  scene.duration = document["duration"].get<double>();
+  scene.seed = document["seed"].get<std::uint64_t>();
+  scene.solver = to_solver(document["solver"]);
+  scene.object = to_object(document["object"], file);
+  scene.tools = to_tools(document["tools"], file);
+  const json& cutting = document["cutting"];
+  scene.cutting.remove_fragments = cutting["remove_fragments"].get<std::string>();
+  scene.cutting.fragment_volume = cutting["fragment_volume"].get<double>();
+  scene.cutting.verify = cutting["verify"].get<bool>();
+  scene.probes = to_probes(document["probes"], file);
+  scene.render = to_render(document["render"], scene.tools, file);
   scene.output.frames = document["output"]["frames"].get<bool>();
   scene.output.surface_final = document["output"]["surface_final"].get<bool>();
   scene.output.surface_every = document["output"]["surface_every"].get<int>();
-
   // The expected block stays JSON text (validated by the schema); see expected.hpp.
   if (document.contains("expected")) scene.expected_json = document["expected"].dump();
   return scene;

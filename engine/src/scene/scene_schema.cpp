@@ -140,6 +140,7 @@ constexpr double max_int = INT_MAX;
 
 // ---- the scene format -----------------------------------------------------------------------------------------------
 
+// function-length: data table (every key of the scene format)
 Entry make_scene_schema() {
   Entry name = string("name", "Scene name, used in the report.");
   name.default_doc = "file stem";

@@ -1,7 +1,7 @@
 #pragma once
 // Stage 2 of the cut pipeline (SPEC §4): the exact, local surface boolean S' = S \ B'. Only the faces of S near the
 // blade take part in the CGAL corefinement; the result is stitched back into S in place. CGAL stays inside
-// surface_cut.cpp.
+// surface_cut_corefine.cpp and surface_cut_verify.cpp (cutting/src/surface_cut_phases.hpp lists the phases).
 #include <cstdint>
 #include <functional>
 #include <string>

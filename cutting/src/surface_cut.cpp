@@ -10,7 +10,6 @@
 #include "octocut/cutting/surface_cut.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <exception>
@@ -22,6 +21,7 @@
 #include <vector>
 
 #include "surface_cut_phases.hpp"
+#include "octocut/sim/timing.hpp"
 
 namespace octocut::cutting {
 namespace {
@@ -96,7 +96,7 @@ void cut(SurfaceEditor& editor, const sim::TriMesh& blade, const SurfaceCutOptio
 
 SurfaceEditResult cut_surface_in_place(SurfaceEditor& editor, const sim::TriMesh& blade,
                                        const SurfaceCutOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = sim::Clock::now();
   const std::size_t mark = editor.mark();
   SurfaceEditResult result;
   result.first_inserted = static_cast<int32_t>(editor.mesh().vertices.size());
@@ -119,7 +119,7 @@ SurfaceEditResult cut_surface_in_place(SurfaceEditor& editor, const sim::TriMesh
   } catch (...) {
     fail("unknown exception");
   }
-  result.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  result.ms = sim::ms_since(start);
   return result;
 }
 
@@ -163,10 +163,10 @@ std::pair<SurfaceEditResult, int> cut_surface_in_place_perturbing(SurfaceEditor&
 }
 
 SurfaceCutResult cut_surface(const sim::TriMesh& surface, const sim::TriMesh& blade, const SurfaceCutOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
+  const auto start = sim::Clock::now();
   SurfaceCutResult result;
   const auto elapsed = [&] {
-    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    return sim::ms_since(start);
   };
   // A copy of S with its grid (whose build checks S's coordinates and indices), edited in place, then compacted.
   sim::TriMesh work = surface;

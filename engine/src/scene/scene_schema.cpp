@@ -351,8 +351,9 @@ Entry make_scene_schema() {
                     object("output",
                            {boolean("frames", false, "Write the rendered frames as PNG files."),
                             boolean("surface_final", false,
-                                    "Write the rest surface and the final deformed surface as binary PLY in metres "
-                                    "(`surface_rest.ply`, `surface_final.ply`)."),
+                                    "Write, as binary PLY in metres, the rest surface before any cut "
+                                    "(`surface_rest.ply`), the rest surface after the cuts (`surface_rest_final.ply`, "
+                                    "on which cuts show as holes) and the final deformed surface (`surface_final.ply`)."),
                             integer("surface_every", 0, closed(0, max_int),
                                     "Write the deformed surface every N steps as `surfaces/surface_<step>.ply` "
                                     "(6 digits, binary PLY, metres), and the rest surface once; 0: never.")},
@@ -660,7 +661,7 @@ std::string format_number(double value) {
 std::string scene_format_markdown() {
   std::ostringstream out;
   out << "# Scene format\n\n"
-      << "This reference is generated from the schema in `engine/src/scene_schema.cpp` by `octocut scene-doc`, and a "
+      << "This reference is generated from the schema in `engine/src/scene/scene_schema.cpp` by `octocut scene-doc`, and a "
          "test checks that it matches; do not edit it by hand. A scene is a JSON object. Units are SI. Paths are "
          "relative to the scene file. Unknown keys are errors, and `[]` in a key stands for every item of an array. "
          "`--set /json/pointer=value` overrides any key from the command line.\n\n"

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "octocut/sim/primitives.hpp"
 #include "octocut/sim/surface.hpp"
 
 namespace octocut::test {
@@ -35,27 +36,12 @@ inline sim::TriMesh ellipsoid_mesh(const sim::Vec3& centre, const sim::Vec3& rad
   return m;
 }
 
-/// A closed, outward prism around the z axis, centred on `c` (m): a regular n-gon of circumradius r (m) from
-/// c.z - h/2 to c.z + h/2, with a centre vertex on each cap (2n + 2 vertices, 4n triangles). The bottom ring comes
-/// first, then the top ring, then the two cap centres.
+/// A closed, outward prism around the z axis, centred on `c` (m): sim::cylinder_mesh (a regular n-gon of
+/// circumradius r from c.z - h/2 to c.z + h/2, a centre vertex on each cap; the bottom ring first, then the top ring,
+/// then the two cap centres) moved to `c`.
 inline sim::TriMesh prism_mesh(const sim::Vec3& c, double r, double h, int n) {
-  using sim::Vec3;
-  sim::TriMesh m;
-  for (int s = 0; s < 2; ++s)
-    for (int i = 0; i < n; ++i) {
-      const double a = 2.0 * std::numbers::pi * i / n;
-      m.vertices.push_back(c + Vec3(r * std::cos(a), r * std::sin(a), (s ? 0.5 : -0.5) * h));
-    }
-  m.vertices.push_back(c + Vec3(0, 0, -0.5 * h));
-  m.vertices.push_back(c + Vec3(0, 0, 0.5 * h));
-  const int bc = 2 * n, tc = 2 * n + 1;
-  for (int i = 0; i < n; ++i) {
-    const int j = (i + 1) % n;
-    m.triangles.push_back({i, j, n + j});
-    m.triangles.push_back({i, n + j, n + i});
-    m.triangles.push_back({bc, j, i});
-    m.triangles.push_back({tc, n + i, n + j});
-  }
+  sim::TriMesh m = sim::cylinder_mesh(r, h, n);
+  for (sim::Vec3& p : m.vertices) p += c;
   return m;
 }
 

@@ -38,27 +38,10 @@ TriMesh box(const Vec3& lo, const Vec3& hi) {
   return m;
 }
 
-// A closed prism around the z axis through (cx, cy): a regular n-gon of circumradius r from z0 to z1, with a centre
-// vertex on each cap, outward oriented (like assets/meshes/blade_cyl2mm.ply). Volume = polygon area * (z1 - z0).
+// A closed prism around the z axis through (cx, cy): a regular n-gon of circumradius r from z0 to z1 (test::prism_mesh).
+// Volume = polygon area * (z1 - z0).
 TriMesh cylinder(double cx, double cy, double r, double z0, double z1, int n = 32) {
-  TriMesh m;
-  for (int side = 0; side < 2; ++side) {
-    for (int i = 0; i < n; ++i) {
-      const double a = 2.0 * std::numbers::pi * i / n;
-      m.vertices.emplace_back(cx + r * std::cos(a), cy + r * std::sin(a), side == 0 ? z0 : z1);
-    }
-  }
-  const auto bottom = static_cast<int32_t>(m.vertices.size());
-  m.vertices.emplace_back(cx, cy, z0);
-  m.vertices.emplace_back(cx, cy, z1);
-  for (int i = 0; i < n; ++i) {
-    const int32_t a = i, b = (i + 1) % n, c = n + i, d = n + (i + 1) % n;
-    m.triangles.push_back({a, b, d});
-    m.triangles.push_back({a, d, c});
-    m.triangles.push_back({bottom, b, a});
-    m.triangles.push_back({bottom + 1, c, d});
-  }
-  return m;
+  return test::prism_mesh(Vec3(cx, cy, 0.5 * (z0 + z1)), r, z1 - z0, n);
 }
 
 using test::prism_area;  // the area of the regular n-gon of circumradius r, m^2

@@ -8,6 +8,7 @@
 #include <tuple>
 #include <vector>
 
+#include "octocut/sim/primitives.hpp"
 #include "octocut/sim/surface.hpp"
 
 namespace octocut::test {
@@ -32,42 +33,9 @@ inline sim::TriMesh octahedron(double r = 1.0) {
 }
 
 /// The surface of the box [origin, origin + edge]^3 with each face cut into n x n squares of two triangles,
-/// outward oriented, vertices shared. |V| = 6 n^2 + 2, |F| = 12 n^2, volume edge^3.
+/// outward oriented, vertices shared (sim::closed_box_grid). |V| = 6 n^2 + 2, |F| = 12 n^2, volume edge^3.
 inline sim::TriMesh grid_cube(int n, double edge = 1.0, const sim::Vec3& origin = sim::Vec3::Zero()) {
-  sim::TriMesh mesh;
-  std::map<std::tuple<int, int, int>, int32_t> index;  // lattice point -> vertex
-  const auto vertex = [&](std::array<int, 3> p) {
-    const auto key = std::make_tuple(p[0], p[1], p[2]);
-    const auto it = index.find(key);
-    if (it != index.end()) return it->second;
-    const auto id = static_cast<int32_t>(mesh.vertices.size());
-    mesh.vertices.push_back(origin + edge / n * sim::Vec3(p[0], p[1], p[2]));
-    index.emplace(key, id);
-    return id;
-  };
-  // For the face with outward normal +-e_a, in-plane axes u, v with e_u x e_v = the normal.
-  for (int a = 0; a < 3; ++a) {
-    for (int side = 0; side < 2; ++side) {
-      int u = (a + 1) % 3;
-      int v = (a + 2) % 3;
-      if (side == 0) std::swap(u, v);
-      for (int i = 0; i < n; ++i) {
-        for (int j = 0; j < n; ++j) {
-          const auto corner = [&](int di, int dj) {
-            std::array<int, 3> p{};
-            p[static_cast<std::size_t>(a)] = side * n;
-            p[static_cast<std::size_t>(u)] = i + di;
-            p[static_cast<std::size_t>(v)] = j + dj;
-            return vertex(p);
-          };
-          const int32_t p00 = corner(0, 0), p10 = corner(1, 0), p11 = corner(1, 1), p01 = corner(0, 1);
-          mesh.triangles.push_back({p00, p10, p11});
-          mesh.triangles.push_back({p00, p11, p01});
-        }
-      }
-    }
-  }
-  return mesh;
+  return sim::closed_box_grid({origin, origin + sim::Vec3::Constant(edge)}, n);
 }
 
 /// grid_cube(n) centred at the origin and pushed out onto the sphere of radius `r`: a closed, convex, outward

@@ -471,6 +471,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
         for (sim::Vec3& p : req.blade.vertices) p = pose.rotation * p + pose.position;
         req.inscribed_radius = tools[ev.tool].inscribed_radius;
         const cutting::CutOutcome o = cutting::apply_cut(cut_object, sim, embedding, req, cut_options);
+        if (cut_object.removed && !sim.empty()) sim.remove_object();  // until apply_cut does it itself
         CutSummary c;
         c.t = ev.t;
         c.tool = scene.tools[ev.tool].name;
@@ -515,14 +516,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
     for (long i = 0; i < steps; ++i) {
       if (g_interrupted) throw std::runtime_error("interrupted by a signal");
       const auto t0 = Clock::now();
-      if (!cut_object.removed) {
-        sim.step();
-      } else {
-        // Nothing left to simulate: time still runs for the tools and the renderer.
-        sim::SimState st = sim.state();
-        st.t += scene.solver.dt;
-        sim.set_state(std::move(st));
-      }
+      sim.step();  // with nothing left to simulate, time still runs for the tools and the renderer
       update_surface();
       run_due_cuts();
       step_ms.push_back(ms_since(t0));

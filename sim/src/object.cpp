@@ -1,22 +1,25 @@
 #include "octocut/sim/object.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cassert>
 #include <cmath>
-#include <numbers>
 #include <numeric>
+#include <span>
 #include <stdexcept>
 
 namespace octocut::sim {
 
 namespace {
 
-// Rotation for XYZ Euler angles in degrees: first about x, then y, then z (fixed axes).
-Mat3 euler_xyz(const Vec3& deg) {
-  const Vec3 r = deg * (std::numbers::pi / 180.0);
-  return (Eigen::AngleAxisd(r.z(), Vec3::UnitZ()) * Eigen::AngleAxisd(r.y(), Vec3::UnitY()) *
-          Eigen::AngleAxisd(r.x(), Vec3::UnitX()))
-      .toRotationMatrix();
+// A handle's keyframed motion at t (translation of the box, rotation about its centre). Before a first keyframe
+// later than 0 the handle moves from its rest pose at t = 0: an implicit identity keyframe there.
+Pose handle_motion(std::span<const PoseKeyframe> keys, double t) {
+  if (keys.front().t > 0.0 && t < keys.front().t) {
+    const std::array<PoseKeyframe, 2> from_rest{PoseKeyframe{}, keys.front()};
+    return interpolate_pose(from_rest, t);
+  }
+  return interpolate_pose(keys, t);
 }
 
 // The boxes where a cut changed the material: a leaf is touched when its closed box meets one of them, grown by a
@@ -49,26 +52,14 @@ class ChangedRegion {
 
 Vec3 HandleSpec::position(const Vec3& X, double t) const {
   if (keyframes.empty()) return X;
-  // Piecewise-linear keyframes; before the first one the handle moves from its rest pose at t = 0.
-  HandleKeyframe a{0.0, Vec3::Zero(), Vec3::Zero()}, b = keyframes.front();
-  if (t >= keyframes.back().t) {
-    a = b = keyframes.back();
-  } else if (t > keyframes.front().t) {
-    for (std::size_t i = 1; i < keyframes.size(); ++i) {
-      if (t <= keyframes[i].t) {
-        a = keyframes[i - 1];
-        b = keyframes[i];
-        break;
-      }
-    }
-  } else if (keyframes.front().t <= 0.0) {
-    a = b;
-  }
-  const double s = (b.t > a.t) ? std::clamp((t - a.t) / (b.t - a.t), 0.0, 1.0) : 1.0;
-  const Vec3 T = (1.0 - s) * a.translation + s * b.translation;
-  const Mat3 R = euler_xyz((1.0 - s) * a.rotation_deg + s * b.rotation_deg);
+  const Pose motion = handle_motion(keyframes, t);
   const Vec3 c = 0.5 * (box.min + box.max);
-  return c + R * (X - c) + T;
+  return c + motion.rotation * (X - c) + motion.position;
+}
+
+ObjectModel::ObjectModel()
+    : m_material(std::make_shared<BoxSetMaterial>(std::vector<Box3>{})), m_unit_k(Mat24::Zero()) {
+  m_dofs.slot_begin = {0};
 }
 
 ObjectModel ObjectModel::build(const OctreeSpec& spec, std::shared_ptr<const MaterialSource> material,
@@ -264,6 +255,8 @@ ObjectModel ObjectModel::without_leaves(const std::vector<int>& leaves) const {
   m.finish(this, {});
   return m;
 }
+
+ObjectModel ObjectModel::emptied() const { return next_revision(m_material); }
 
 ObjectModel ObjectModel::next_revision(std::shared_ptr<const MaterialSource> material) const {
   ObjectModel m;

@@ -1,6 +1,7 @@
 // Implicit Euler: free fall against the analytic solution, energy never increases without damping, guards recover.
 #include <gtest/gtest.h>
 
+#include "octocut/sim/fem_system.hpp"
 #include "octocut/sim/parallel.hpp"
 #include "test_util.hpp"
 

@@ -7,6 +7,7 @@
 #include <numbers>
 #include <random>
 
+#include "octocut/sim/fem_system.hpp"
 #include "octocut/sim/parallel.hpp"
 #include "test_util.hpp"
 

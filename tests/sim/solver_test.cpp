@@ -4,6 +4,7 @@
 
 #include <Eigen/Dense>
 
+#include "octocut/sim/fem_system.hpp"
 #include "octocut/sim/linear_solver.hpp"
 #include "octocut/sim/parallel.hpp"
 #include "test_util.hpp"

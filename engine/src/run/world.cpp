@@ -209,7 +209,7 @@ void World::Impl::bind_surface() {
 }
 
 void World::Impl::update_surface() {
-  if (object.removed) {
+  if (sim->empty()) {
     deformed.clear();
     deformed_normals.clear();
     return;
@@ -233,6 +233,7 @@ CutSummary World::Impl::cut(std::size_t i, double t, bool scheduled) {
   for (sim::Vec3& p : req.blade.vertices) p = pose.apply(p);
   req.inscribed_radius = tr.inscribed_radius;
   const cutting::CutOutcome o = cutting::apply_cut(object, *sim, *embedding, req, cut_options);
+  if (object.removed && !sim->empty()) sim->remove_object();  // nothing left to simulate: time still runs
 
   CutSummary c;
   c.t = t;
@@ -248,8 +249,8 @@ CutSummary World::Impl::cut(std::size_t i, double t, bool scheduled) {
   c.leaves_refined = o.leaves_refined;
   c.fragments_removed = o.fragments_removed;
   c.fragment_volume_m3 = o.fragment_volume;
-  c.elements_after = object.removed ? 0 : sim->model().num_elements();
-  c.dofs_after = object.removed ? 0 : sim->model().num_dofs();
+  c.elements_after = sim->model().num_elements();
+  c.dofs_after = sim->model().num_dofs();
   c.surface_vertices_after = long(object.surface.num_vertices());
   c.ms = {o.ms.back_transform, o.ms.surface, o.ms.material_graph, o.ms.refine, o.ms.node_split,
           o.ms.embedding,      o.ms.solver_update, o.ms.total};
@@ -279,10 +280,10 @@ void World::Impl::record_counts(Report& r) const {
   // Counts of the current revision and of S.
   const sim::ObjectModel& m = sim->model();
   const sim::TriMesh& surface = object.surface;
-  r.object_removed = object.removed;
-  r.elements = object.removed ? 0 : m.num_elements();
-  r.dofs = object.removed ? 0 : m.num_dofs();
-  r.hanging_slots = object.removed ? 0 : m.dofs().hanging_slots;
+  r.object_removed = sim->empty();
+  r.elements = m.num_elements();
+  r.dofs = m.num_dofs();
+  r.hanging_slots = m.dofs().hanging_slots;
   r.tets = object.graph ? object.graph->num_tets() : 0;
   r.surface_vertices = long(surface.num_vertices());
   r.surface_triangles = long(surface.num_triangles());
@@ -306,7 +307,7 @@ void World::Impl::record_state(Report& r) const {
   // Probes, energies and the stability counters of the current state.
   const sim::ObjectModel& m = sim->model();
   for (const Probe& p : scene.probes) {
-    const auto e = object.removed ? std::nullopt : m.embed(v3(p.point));
+    const auto e = m.embed(v3(p.point));
     if (!e) {
       r.warnings.push_back("probe " + p.name + ": its point was cut away");
       r.probes.push_back({p.name, p.point, {NAN, NAN, NAN}});
@@ -323,8 +324,8 @@ void World::Impl::record_state(Report& r) const {
   r.speed_limit = st.speed_limit;
   r.newton_unconverged = st.newton_unconverged;
   r.max_speed_m_s = st.max_speed;
-  r.kinetic_j = object.removed ? 0.0 : sim->kinetic_energy();
-  r.elastic_j = object.removed ? 0.0 : sim->elastic_energy();
+  r.kinetic_j = sim->kinetic_energy();
+  r.elastic_j = sim->elastic_energy();
   r.sim_time_s = sim->state().t;
   if (st.failed_steps > 0)
     r.warnings.push_back(std::to_string(st.failed_steps) +
@@ -344,14 +345,7 @@ StepResult World::step() {
   const auto t0 = sim::Clock::now();
   StepResult r;
   m->run_due_cuts(r.cuts);
-  if (!m->object.removed) {
-    m->sim->step();
-  } else {
-    // Nothing left to simulate: time still runs for the tools and the renderer.
-    sim::SimState st = m->sim->state();
-    st.t += m->scene.solver.dt;
-    m->sim->set_state(std::move(st));
-  }
+  m->sim->step();  // an object cut away entirely only advances time (sim::Simulator::remove_object)
   m->update_surface();
   m->run_due_cuts(r.cuts);
   ++m->steps;
@@ -395,7 +389,7 @@ RenderScene World::render_scene() const {
   const sim::ObjectModel& model = m->sim->model();
   std::vector<sim::Vec3> slots;
   model.dofs().prolong(m->sim->state().x, slots);
-  if (m->object.removed) {
+  if (m->sim->empty()) {
     // Nothing left to draw of the tissue.
   } else if (!m->object.graph) {
     rs.meshes.push_back(tissue_mesh(model, m->box_tissue, slots));
@@ -422,7 +416,7 @@ RenderScene World::render_scene() const {
     }
     if (scene.tools[i].name == scene.render.camera.follow_tool) follow_tool(rs.camera, pose.position);
   }
-  if (!m->object.removed) add_overlays(rs, scene.render.overlays, model, slots, m->sim->state().x);
+  if (!m->sim->empty()) add_overlays(rs, scene.render.overlays, model, slots, m->sim->state().x);
   return rs;
 }
 
@@ -446,6 +440,6 @@ const sim::Simulator& World::simulator() const { return *m->sim; }
 const sim::TriMesh& World::rest_surface() const { return m->object.surface; }
 const std::vector<sim::Vec3>& World::deformed_vertices() const { return m->deformed; }
 sim::TriMesh World::deformed_surface() const { return sim::TriMesh{m->deformed, m->object.surface.triangles}; }
-bool World::object_removed() const { return m->object.removed; }
+bool World::object_removed() const { return m->sim->empty(); }
 
 }  // namespace octocut::engine

@@ -206,7 +206,8 @@ Entry make_scene_schema() {
           vec3("translation", std::array{0.0, 0.0, 0.0}, "Translation of the box, m."),
           vec3("rotation_deg", std::array{0.0, 0.0, 0.0}, "XYZ Euler angles about the box centre, degrees."),
       },
-      "Rigid motion, interpolated linearly from the rest pose at t = 0 and held after the last keyframe; none: the handle is fixed.");
+      "Rigid motion: translation linear and rotation slerp between keyframes (as tools and props), from the rest "
+      "pose at t = 0, held after the last keyframe; none: the handle is fixed.");
 
   Entry object_entry = required(object(
       "object",

@@ -14,6 +14,7 @@
 #include "octocut/sim/hex_element.hpp"
 #include "octocut/sim/material.hpp"
 #include "octocut/sim/octree.hpp"
+#include "octocut/sim/pose.hpp"
 
 namespace octocut::sim {
 
@@ -26,19 +27,17 @@ struct MaterialParams {
   double rayleigh_stiffness = 0.0; ///< beta, s
 };
 
-/// One keyframe of a handle's rigid motion.
-struct HandleKeyframe {
-  double t = 0.0;                       ///< s
-  Vec3 translation = Vec3::Zero();      ///< m
-  Vec3 rotation_deg = Vec3::Zero();     ///< XYZ Euler angles about the box centre, degrees
-};
-
 /// A rest-space box whose DOFs follow a keyframed rigid motion (fixed without keyframes).
 struct HandleSpec {
-  Box3 box;                               ///< rest-space box, m
-  std::vector<HandleKeyframe> keyframes;  ///< sorted by t
+  Box3 box;  ///< rest-space box, m
+  /// The motion, sorted by t: `position` is the translation of the box (of its centre), m, and `rotation_deg` the
+  /// XYZ Euler angles of its rotation about the box centre, degrees.
+  std::vector<PoseKeyframe> keyframes;
 
-  /// Where rest point X (m) is at time t (s): piecewise-linear translation and Euler angles, held at the ends.
+  /// Where rest point X (m) is at time t (s): c + R (X - c) + p for the box centre c and the pose (p, R) that
+  /// interpolate_pose gives for the keyframes (translation linear, rotation slerp, held after the last keyframe).
+  /// Before a first keyframe later than t = 0 the handle moves from its rest pose at t = 0, as if an identity
+  /// keyframe were at t = 0.
   [[nodiscard]] Vec3 position(const Vec3& X, double t) const;
 };
 
@@ -69,6 +68,10 @@ struct PointEmbedding {
 /// Constant description of one deformable object for one topology revision.
 class ObjectModel {
  public:
+  /// An empty model, the state of an object that cuts removed entirely: no leaves, elements, DOFs, slots or
+  /// handles, and a material that holds none. Every accessor works on it; embed() finds nothing.
+  ObjectModel();
+
   /// Builds the octree (uniform to base_level, then the refine regions), drops empty leaves, and builds the DOFs.
   static ObjectModel build(const OctreeSpec& octree, std::shared_ptr<const MaterialSource> material,
                            const MaterialParams& params, std::vector<HandleSpec> handles);
@@ -113,6 +116,10 @@ class ObjectModel {
   /// rebuilt locally. Throws std::out_of_range for a bad index and std::invalid_argument when every leaf would go.
   [[nodiscard]] ObjectModel without_leaves(const std::vector<int>& leaves) const;
 
+  /// A new revision without any leaf, for an object cut away entirely: the root, material, parameters, handles and
+  /// max level are kept, and the model is empty as a default-constructed one is (no elements, no DOFs).
+  [[nodiscard]] ObjectModel emptied() const;
+
   [[nodiscard]] const Octree& tree() const { return m_tree; }
   [[nodiscard]] const RootGeometry& root() const { return m_root; }
   [[nodiscard]] const DofMap& dofs() const { return m_dofs; }
@@ -121,7 +128,7 @@ class ObjectModel {
   [[nodiscard]] const std::vector<HandleSpec>& handles() const { return m_handles; }
   [[nodiscard]] int max_level() const { return m_max_level; }
   [[nodiscard]] int revision() const { return m_revision; }
-  [[nodiscard]] int num_elements() const { return m_tree.size(); }
+  [[nodiscard]] int num_elements() const { return m_tree.size(); }  ///< 0 for an empty model
   [[nodiscard]] int num_dofs() const { return m_dofs.num_dofs; }
 
   [[nodiscard]] const std::vector<double>& occupancy() const { return m_occupancy; }  ///< (num_elements), [0,1]

@@ -1,5 +1,6 @@
 #pragma once
-// Corotational FEM, the linearised implicit Euler step, the static Newton solve, and the step guards (SPEC §3).
+// The linearised implicit Euler step, the static Newton solve, and the step guards (SPEC §3), over the FEM system of
+// fem_system.hpp.
 #include <memory>
 #include <string>
 #include <vector>
@@ -10,6 +11,8 @@
 namespace octocut::sim {
 
 class Executor;
+class FemSystem;
+struct ElementFrame;
 
 struct SimulatorOptions {
   bool dynamic = true;                         ///< false: static equilibrium solves
@@ -43,50 +46,6 @@ struct StepProfile {
   double solve = 0.0;      ///< linear solve (factorisation or pcg)
 };
 
-/// Per-element corotational data at one configuration.
-struct ElementFrame {
-  std::vector<Mat3> rotation;  ///< R of each element (num_elements)
-};
-
-/// The FEM assembly for one model revision: forces and the corotated stiffness gathered through P.
-class FemSystem {
- public:
-  FemSystem(const ObjectModel& model, Executor& executor);
-  ~FemSystem();
-
-  /// Slot positions P x from DOF positions, m.
-  void prolong(const std::vector<Vec3>& dofs, std::vector<Vec3>& slots) const;
-  /// Element rotations at the configuration x (num_dofs).
-  void rotations(const std::vector<Vec3>& x, ElementFrame& frame) const;
-  /// Elastic restoring force P^T f_e (3 num_dofs), N, with rotations taken from `frame`.
-  void elastic_force(const std::vector<Vec3>& x, const ElementFrame& frame, VecX& f) const;
-  /// Elastic energy 1/2 sum (R^T x - X)^T K (R^T x - X), J.
-  double elastic_energy(const std::vector<Vec3>& x, const ElementFrame& frame) const;
-  /// Corotated stiffness P^T R K R^T P (3 num_dofs square, both triangles), N/m.
-  SpMat stiffness(const ElementFrame& frame) const;
-  /// K v for the corotated stiffness, without assembling it (3 num_dofs).
-  void stiffness_product(const ElementFrame& frame, const VecX& v, VecX& out) const;
-
-  /// Assembles A = m M + k K with the rows and columns of constrained DOFs (per node, num_dofs) replaced by
-  /// identity, into `A` (its pattern is built on first use and then kept), and returns in `coupling` the product
-  /// A_fc u_c of the unconstrained rows with the prescribed values u (only entries of constrained DOFs are read).
-  void assemble_system(double m, double k, const ElementFrame& frame, const std::vector<char>& constrained,
-                       const VecX& u, SpMat& A, VecX& coupling);
-  /// The fixed sparsity pattern of the system matrix for the constrained flags (num_dofs), values zero; built once
-  /// per flags and kept.
-  const SpMat& system_pattern(const std::vector<char>& constrained);
-  /// Points the system at `model`, which must be the model it was built for, moved to another address, and runs its
-  /// element loops on `executor` from now on.
-  void rebind(const ObjectModel& model, Executor& executor);
-  /// Like elastic_force, and also the product K v of the corotated stiffness with v (both 3 num_dofs).
-  void force_and_product(const std::vector<Vec3>& x, const ElementFrame& frame, const VecX& v, VecX& f,
-                         VecX& kv) const;
-
- private:
-  struct Impl;
-  std::unique_ptr<Impl> m_impl;
-};
-
 /// A model revision made ready off to the side by Simulator::prepare_model: the state carried over, the FEM system,
 /// and optionally the system pattern with the linear solver's symbolic analysis. Move-only.
 class PreparedModel {
@@ -113,9 +72,11 @@ class Simulator {
   Simulator& operator=(const Simulator&) = delete;
 
   /// Advances by options.dt: an implicit Euler step (dynamic) or a static solve at the handles' pose at t + dt. A
-  /// failed attempt is rolled back and retried with halved steps; the call itself never fails.
+  /// failed attempt is rolled back and retried with halved steps; the call itself never fails. With no object
+  /// (empty()) only the time advances.
   void step();
-  /// Solves for static equilibrium with the handles posed at time t. Returns true when converged.
+  /// Solves for static equilibrium with the handles posed at time t. Returns true when converged (always when
+  /// empty()).
   bool solve_static(double t);
 
   /// Replaces the model (a new revision) and carries the state over.
@@ -134,20 +95,25 @@ class Simulator {
   void adopt(PreparedModel prepared);
   /// Replaces the state (same revision).
   void set_state(SimState state);
+  /// Drops the object, for a cut that removed every element: afterwards empty() holds, model() is the current
+  /// model's emptied() revision (no elements, DOFs or leaves), the state keeps its time t and has no DOFs, and the
+  /// solver holds nothing. A later step() only advances t by options.dt; set_model or adopt bring an object back.
+  void remove_object();
+  /// True when there is no object to simulate: the model has no elements (after remove_object, or built empty).
+  [[nodiscard]] bool empty() const { return m_model.num_elements() == 0; }
 
   [[nodiscard]] const ObjectModel& model() const { return m_model; }
   [[nodiscard]] const SimState& state() const { return m_state; }
   [[nodiscard]] const StabilityStats& stats() const { return m_stats; }
   [[nodiscard]] const SimulatorOptions& options() const { return m_options; }
-  [[nodiscard]] FemSystem& fem() { return *m_fem; }
 
-  /// Kinetic energy 1/2 v^T M v, J.
+  /// Kinetic energy 1/2 v^T M v, J (0 when empty()).
   [[nodiscard]] double kinetic_energy() const;
-  /// Elastic energy at the current state, J.
+  /// Elastic energy at the current state, J (0 when empty()).
   [[nodiscard]] double elastic_energy() const;
   /// Current deformed position of an embedded rest point, m.
   [[nodiscard]] Vec3 position(const PointEmbedding& e) const;
-  /// Largest DOF speed in the current state, m/s.
+  /// Largest DOF speed in the current state, m/s (0 when empty()).
   [[nodiscard]] double max_speed() const;
   /// Total iterations of the last linear solve (pcg) and whether it refactorised.
   [[nodiscard]] const SolveInfo& last_solve() const { return m_last_solve; }
@@ -155,7 +121,25 @@ class Simulator {
   [[nodiscard]] const StepProfile& profile() const { return m_profile; }
 
  private:
+  // One implicit Euler attempt of length dt; false (state untouched) when it fails a guard.
   bool try_dynamic_step(double dt);
+  // Velocity increments (3 num_dofs) that take the handle DOFs to their pose at t + dt, held in `target` (num_dofs).
+  [[nodiscard]] VecX prescribed_increments(double dt, std::vector<Vec3>& target) const;
+  // Assembles and solves the implicit Euler system for the velocity increment dv (3 num_dofs).
+  bool solve_increment(double dt, const VecX& dv_c, VecX& dv);
+  // Checks the state that dv gives and commits it, advancing t by dt.
+  bool commit_step(double dt, const VecX& dv, const std::vector<Vec3>& target);
+  // The defined reset after a step failed at the smallest dt, from the step's start state.
+  void reset_failed_step(const SimState& start);
+  // The linear solver's symbolic analysis of m_A, once per revision.
+  void analyze_if_needed();
+  // Static residual f_el(x) + f_ext with constrained rows zeroed (3 num_dofs), its norm returned; frame left at x.
+  double static_residual(const std::vector<Vec3>& x, const VecX& f_ext, ElementFrame& frame, VecX& r) const;
+  // Newton direction dx from the corotated tangent at `frame`; false when the solve fails.
+  bool newton_direction(const ElementFrame& frame, const VecX& r, VecX& dx);
+  // Backtracking from x along dx: on a finite residual x, r and frame move to the accepted point. Returns its norm.
+  double line_search(std::vector<Vec3>& x, const VecX& dx, const VecX& f_ext, double rn, int& allowance,
+                     ElementFrame& frame, VecX& r) const;
   void rebuild();
   [[nodiscard]] std::unique_ptr<LinearSolver> make_solver() const;
 

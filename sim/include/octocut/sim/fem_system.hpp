@@ -1,0 +1,57 @@
+#pragma once
+// The corotational hex FEM of one model revision (SPEC §3): element rotations, elastic forces and energy, and the
+// corotated stiffness gathered through the DOF map P, assembled into the implicit Euler system matrix.
+#include <memory>
+#include <vector>
+
+#include "octocut/sim/object.hpp"
+
+namespace octocut::sim {
+
+class Executor;
+
+/// Per-element corotational data at one configuration.
+struct ElementFrame {
+  std::vector<Mat3> rotation;  ///< R of each element (num_elements)
+};
+
+/// The FEM assembly for one model revision: forces and the corotated stiffness gathered through P.
+class FemSystem {
+ public:
+  FemSystem(const ObjectModel& model, Executor& executor);
+  ~FemSystem();
+
+  /// Slot positions P x from DOF positions, m.
+  void prolong(const std::vector<Vec3>& dofs, std::vector<Vec3>& slots) const;
+  /// Element rotations at the configuration x (num_dofs).
+  void rotations(const std::vector<Vec3>& x, ElementFrame& frame) const;
+  /// Elastic restoring force P^T f_e (3 num_dofs), N, with rotations taken from `frame`.
+  void elastic_force(const std::vector<Vec3>& x, const ElementFrame& frame, VecX& f) const;
+  /// Elastic energy 1/2 sum (R^T x - X)^T K (R^T x - X), J.
+  double elastic_energy(const std::vector<Vec3>& x, const ElementFrame& frame) const;
+  /// Corotated stiffness P^T R K R^T P (3 num_dofs square, both triangles), N/m.
+  SpMat stiffness(const ElementFrame& frame) const;
+  /// K v for the corotated stiffness, without assembling it (3 num_dofs).
+  void stiffness_product(const ElementFrame& frame, const VecX& v, VecX& out) const;
+
+  /// Assembles A = m M + k K with the rows and columns of constrained DOFs (per node, num_dofs) replaced by
+  /// identity, into `A` (its pattern is built on first use and then kept), and returns in `coupling` the product
+  /// A_fc u_c of the unconstrained rows with the prescribed values u (only entries of constrained DOFs are read).
+  void assemble_system(double m, double k, const ElementFrame& frame, const std::vector<char>& constrained,
+                       const VecX& u, SpMat& A, VecX& coupling);
+  /// The fixed sparsity pattern of the system matrix for the constrained flags (num_dofs), values zero; built once
+  /// per flags and kept.
+  const SpMat& system_pattern(const std::vector<char>& constrained);
+  /// Points the system at `model`, which must be the model it was built for, moved to another address, and runs its
+  /// element loops on `executor` from now on.
+  void rebind(const ObjectModel& model, Executor& executor);
+  /// Like elastic_force, and also the product K v of the corotated stiffness with v (both 3 num_dofs).
+  void force_and_product(const std::vector<Vec3>& x, const ElementFrame& frame, const VecX& v, VecX& f,
+                         VecX& kv) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> m_impl;
+};
+
+}  // namespace octocut::sim

@@ -1,0 +1,415 @@
+#include "octocut/sim/fem_system.hpp"
+
+#include <algorithm>
+
+#include "octocut/sim/parallel.hpp"
+
+namespace octocut::sim {
+
+namespace {
+constexpr int kGrain = 64;  // elements per parallel chunk
+
+// One entry of an element's gather list: corner a of the element feeds DOF `dof` with weight w.
+struct GatherEntry {
+  int corner;
+  int dof;
+  double w;
+};
+
+// Positions of an element's 8 slots as a 24-vector and as a 3 x 8 matrix.
+void element_slots(const std::vector<Vec3>& slots, int e, Vec24& xe, Eigen::Matrix<double, 3, 8>& xm) {
+  for (int a = 0; a < 8; ++a) {
+    const Vec3& p = slots[8 * std::size_t(e) + std::size_t(a)];
+    xe.segment<3>(3 * a) = p;
+    xm.col(a) = p;
+  }
+}
+
+// The block structure of the system matrix (3 x 3 blocks of DOF pairs) in flat arrays. Every diagonal block is
+// present, constrained DOFs included.
+struct BlockPattern {
+  std::vector<int> elem_ptr;  // start of each element's free DOFs in elem_dof (num_elements + 1)
+  std::vector<int> elem_dof;  // the free DOFs each element couples, sorted and unique per element
+  std::vector<int> col_ptr;   // start of each block column's rows in col_row (num_dofs + 1)
+  std::vector<int> col_row;   // per block column the sorted block rows: the union of its elements' DOFs
+};
+
+// The free DOFs each element couples (elem_ptr, elem_dof), and how many elements couple each DOF, as the prefix
+// sums dof_ptr (num_dofs + 1).
+void element_free_dofs(const std::vector<std::vector<GatherEntry>>& gather, const std::vector<char>& constrained,
+                       int nd, BlockPattern& bp, std::vector<int>& dof_ptr) {
+  const int ne = int(gather.size());
+  bp.elem_ptr.assign(std::size_t(ne) + 1, 0);
+  bp.elem_dof.clear();
+  std::size_t gathered = 0;
+  for (const auto& g : gather) gathered += g.size();
+  bp.elem_dof.reserve(gathered);
+  dof_ptr.assign(std::size_t(nd) + 1, 0);
+  for (int e = 0; e < ne; ++e) {
+    const std::size_t b = bp.elem_dof.size();
+    bp.elem_ptr[std::size_t(e)] = int(b);
+    for (const GatherEntry& p : gather[std::size_t(e)])
+      if (!constrained[std::size_t(p.dof)]) bp.elem_dof.push_back(p.dof);
+    std::sort(bp.elem_dof.begin() + std::ptrdiff_t(b), bp.elem_dof.end());
+    bp.elem_dof.erase(std::unique(bp.elem_dof.begin() + std::ptrdiff_t(b), bp.elem_dof.end()), bp.elem_dof.end());
+    for (std::size_t i = b; i < bp.elem_dof.size(); ++i) ++dof_ptr[std::size_t(bp.elem_dof[i]) + 1];
+  }
+  bp.elem_ptr[std::size_t(ne)] = int(bp.elem_dof.size());
+  for (int d = 0; d < nd; ++d) dof_ptr[std::size_t(d) + 1] += dof_ptr[std::size_t(d)];
+}
+
+// The block structure for the gather lists (num_elements) and the constrained flags (num_dofs).
+BlockPattern block_pattern(const std::vector<std::vector<GatherEntry>>& gather, const std::vector<char>& constrained,
+                           int nd) {
+  BlockPattern bp;
+  std::vector<int> dof_ptr;
+  element_free_dofs(gather, constrained, nd, bp, dof_ptr);
+  const int ne = int(gather.size());
+
+  // The elements of each DOF (dof_ptr, dof_elem).
+  std::vector<int> dof_elem(bp.elem_dof.size());
+  std::vector<int> fill(dof_ptr.begin(), dof_ptr.end() - 1);
+  for (int e = 0; e < ne; ++e)
+    for (int i = bp.elem_ptr[std::size_t(e)]; i < bp.elem_ptr[std::size_t(e) + 1]; ++i)
+      dof_elem[std::size_t(fill[std::size_t(bp.elem_dof[std::size_t(i)])]++)] = e;
+
+  // Per block column k: k itself and the DOFs of every element of k, sorted.
+  bp.col_ptr.resize(std::size_t(nd) + 1);
+  bp.col_row.reserve(bp.elem_dof.size() * 8 + std::size_t(nd));
+  std::vector<int> mark(std::size_t(nd), -1);  // mark[j] == k: j is already a row of column k
+  for (int k = 0; k < nd; ++k) {
+    const std::size_t b = bp.col_row.size();
+    bp.col_ptr[std::size_t(k)] = int(b);
+    bp.col_row.push_back(k);
+    mark[std::size_t(k)] = k;
+    for (int t = dof_ptr[std::size_t(k)]; t < dof_ptr[std::size_t(k) + 1]; ++t) {
+      const int e = dof_elem[std::size_t(t)];
+      for (int i = bp.elem_ptr[std::size_t(e)]; i < bp.elem_ptr[std::size_t(e) + 1]; ++i) {
+        const int j = bp.elem_dof[std::size_t(i)];
+        if (mark[std::size_t(j)] != k) {
+          mark[std::size_t(j)] = k;
+          bp.col_row.push_back(j);
+        }
+      }
+    }
+    std::sort(bp.col_row.begin() + std::ptrdiff_t(b), bp.col_row.end());
+  }
+  bp.col_ptr[std::size_t(nd)] = int(bp.col_row.size());
+  return bp;
+}
+}  // namespace
+
+struct FemSystem::Impl {
+  const ObjectModel* model_ptr;  // the model this system was built for (the simulator's, or a prepared one's)
+  const ObjectModel& model() const { return *model_ptr; }
+  Executor* executor_ptr;  // runs the element loops (the simulator's, or a serial one while prepared)
+  std::vector<std::vector<GatherEntry>> gather;  // per element: its slots' rows of P (num_elements)
+  std::vector<Vec24> rest;                        // rest slot positions per element, m (num_elements)
+
+  // Fixed sparse pattern of the system matrix, built on the first assemble_system call.
+  bool have_pattern = false;
+  SpMat pattern;                                  // the system matrix's pattern, values zero (3 num_dofs square)
+  std::vector<char> pattern_constrained;          // constrained flags the pattern was built for (num_dofs)
+  std::vector<int> pair_offsets;                  // per element, per (p, q) entry pair: 3 column offsets, or -1
+  std::vector<std::size_t> pair_begin;            // start of each element's pair offsets (num_elements + 1)
+  std::vector<int> diag_offsets;                  // per scalar DOF: offset of its diagonal entry (3 num_dofs)
+  std::vector<double> rotated;                    // per element R K R^T, scaled (num_elements x 576)
+
+  Impl(const ObjectModel& m, Executor& ex) : model_ptr(&m), executor_ptr(&ex) {
+    const DofMap& dm = m.dofs();
+    const int ne = m.num_elements();
+    gather.resize(std::size_t(ne));
+    rest.resize(std::size_t(ne));
+    for (int e = 0; e < ne; ++e) {
+      for (int a = 0; a < 8; ++a) {
+        const int s = 8 * e + a;
+        for (int i = dm.slot_begin[std::size_t(s)]; i < dm.slot_begin[std::size_t(s) + 1]; ++i)
+          gather[std::size_t(e)].push_back({a, dm.slot_dof[std::size_t(i)], dm.slot_weight[std::size_t(i)]});
+        rest[std::size_t(e)].segment<3>(3 * a) = m.slot_rest()[std::size_t(s)];
+      }
+    }
+  }
+
+  Mat24 element_k(int e) const { return model().stiffness_scale()[std::size_t(e)] * model().unit_stiffness(); }
+
+  // Adds the element vectors (num_elements x 24) into a DOF vector through P^T, in a fixed order.
+  void gather_vectors(const std::vector<Vec24>& fe, VecX& f) const {
+    f.setZero(3 * model().num_dofs());
+    for (std::size_t e = 0; e < gather.size(); ++e)
+      for (const GatherEntry& g : gather[e]) f.segment<3>(3 * g.dof) += g.w * fe[e].segment<3>(3 * g.corner);
+  }
+
+  // Scatters a DOF vector to element slots: v_e = (P v) restricted to element e.
+  Vec24 element_vector(int e, const VecX& v) const {
+    Vec24 out = Vec24::Zero();
+    for (const GatherEntry& g : gather[std::size_t(e)]) out.segment<3>(3 * g.corner) += g.w * v.segment<3>(3 * g.dof);
+    return out;
+  }
+
+  // The pattern, its diagonal offsets and the element pair offsets for the constrained flags (num_dofs).
+  void build_pattern(const std::vector<char>& constrained) {
+    const BlockPattern bp = block_pattern(gather, constrained, model().num_dofs());
+    fill_scalar_pattern(bp);
+    fill_pair_offsets(bp, constrained);
+    pattern_constrained = constrained;
+    have_pattern = true;
+  }
+
+  // Scalar CSC of the block pattern: column 3k + c holds rows 3j, 3j + 1, 3j + 2 for every block row j of block
+  // column k; it starts at 9 col_ptr[k] + 3 c len(k). Filled in parallel by block column (disjoint ranges), with the
+  // offset of each diagonal entry.
+  void fill_scalar_pattern(const BlockPattern& bp) {
+    const int nd = model().num_dofs();
+    const std::size_t nnz = 9 * bp.col_row.size();
+    if (pattern.rows() != 3 * nd || pattern.cols() != 3 * nd) pattern = SpMat(3 * nd, 3 * nd);
+    pattern.resizeNonZeros(Eigen::Index(nnz));
+    int* outer = pattern.outerIndexPtr();
+    int* inner = pattern.innerIndexPtr();
+    double* values = pattern.valuePtr();
+    diag_offsets.resize(3 * std::size_t(nd));
+    executor_ptr->parallel_for(nd, 256, [&](int kb, int ke) {
+      for (int k = kb; k < ke; ++k) {
+        const int b = bp.col_ptr[std::size_t(k)], len = bp.col_ptr[std::size_t(k) + 1] - b;
+        const int* rows = bp.col_row.data() + b;
+        const int diag = 3 * int(std::lower_bound(rows, rows + len, k) - rows);
+        int at = 9 * b;
+        std::fill(values + at, values + at + 9 * len, 0.0);
+        for (int c = 0; c < 3; ++c) {
+          outer[3 * k + c] = at;
+          diag_offsets[3 * std::size_t(k) + std::size_t(c)] = at + diag + c;
+          for (int t = b; t < b + len; ++t) {
+            const int j = bp.col_row[std::size_t(t)];
+            inner[at++] = 3 * j;
+            inner[at++] = 3 * j + 1;
+            inner[at++] = 3 * j + 2;
+          }
+        }
+      }
+    });
+    outer[3 * nd] = int(nnz);
+  }
+
+  // Offsets of each element's entry pairs in the pattern: the entry of block (j, k) in column 3k + c is
+  // outer[3k + c] + 3 pos(j in column k). Positions come from one merge walk per (element, free DOF) instead of a
+  // search per entry. Independent per element: parallel.
+  void fill_pair_offsets(const BlockPattern& bp, const std::vector<char>& constrained) {
+    const int ne = model().num_elements();
+    const int* out_ptr = pattern.outerIndexPtr();
+    pair_begin.resize(std::size_t(ne) + 1);
+    std::size_t pairs = 0;
+    for (int e = 0; e < ne; ++e) {
+      pair_begin[std::size_t(e)] = pairs;
+      pairs += 3 * gather[std::size_t(e)].size() * gather[std::size_t(e)].size();
+    }
+    pair_begin[std::size_t(ne)] = pairs;
+    pair_offsets.resize(pairs);
+    executor_ptr->parallel_for(ne, kGrain, [&](int eb, int ee) {
+      std::vector<int> local;  // index in the element's DOF list of each gather entry, -1 when constrained
+      std::vector<int> pos;    // pos[a * n + b]: position of DOF b in block column a (element-local indices)
+      for (int e = eb; e < ee; ++e) {
+        const auto& g = gather[std::size_t(e)];
+        const int* u = bp.elem_dof.data() + bp.elem_ptr[std::size_t(e)];
+        const std::size_t n = std::size_t(bp.elem_ptr[std::size_t(e) + 1] - bp.elem_ptr[std::size_t(e)]);
+        pos.resize(n * n);
+        for (std::size_t a2 = 0; a2 < n; ++a2) {
+          const int* r = bp.col_row.data() + bp.col_ptr[std::size_t(u[a2])];
+          std::size_t i = 0;
+          for (std::size_t b2 = 0; b2 < n; ++b2) {
+            while (r[i] < u[b2]) ++i;
+            pos[a2 * n + b2] = int(i);
+          }
+        }
+        local.resize(g.size());
+        for (std::size_t i = 0; i < g.size(); ++i)
+          local[i] = constrained[std::size_t(g[i].dof)] ? -1 : int(std::lower_bound(u, u + n, g[i].dof) - u);
+        int* off = pair_offsets.data() + pair_begin[std::size_t(e)];
+        for (std::size_t pi = 0; pi < g.size(); ++pi)
+          for (std::size_t qi = 0; qi < g.size(); ++qi, off += 3) {
+            if (local[pi] < 0 || local[qi] < 0) {
+              off[0] = off[1] = off[2] = -1;
+              continue;
+            }
+            const int k = g[qi].dof;
+            const int p3 = 3 * pos[std::size_t(local[qi]) * n + std::size_t(local[pi])];
+            for (int c = 0; c < 3; ++c) off[c] = out_ptr[3 * k + c] + p3;
+          }
+      }
+    });
+  }
+};
+
+FemSystem::FemSystem(const ObjectModel& model, Executor& executor)
+    : m_impl(std::make_unique<Impl>(model, executor)) {}
+FemSystem::~FemSystem() = default;
+
+void FemSystem::rebind(const ObjectModel& model, Executor& executor) {
+  m_impl->model_ptr = &model;
+  m_impl->executor_ptr = &executor;
+}
+
+void FemSystem::prolong(const std::vector<Vec3>& dofs, std::vector<Vec3>& slots) const {
+  m_impl->model().dofs().prolong(dofs, slots);
+}
+
+void FemSystem::rotations(const std::vector<Vec3>& x, ElementFrame& frame) const {
+  const ObjectModel& m = m_impl->model();
+  std::vector<Vec3> slots;
+  prolong(x, slots);
+  frame.rotation.resize(std::size_t(m.num_elements()));
+  m_impl->executor_ptr->parallel_for(m.num_elements(), kGrain, [&](int b, int en) {
+    Vec24 xe;
+    Eigen::Matrix<double, 3, 8> xm;
+    for (int e = b; e < en; ++e) {
+      element_slots(slots, e, xe, xm);
+      frame.rotation[std::size_t(e)] = polar_rotation(hex_center_gradient(xm, m.edge()[std::size_t(e)]));
+    }
+  });
+}
+
+void FemSystem::force_and_product(const std::vector<Vec3>& x, const ElementFrame& frame, const VecX& v, VecX& f,
+                                  VecX& kv) const {
+  const ObjectModel& m = m_impl->model();
+  const int ne = m.num_elements();
+  std::vector<Vec3> slots;
+  prolong(x, slots);
+  const bool want_kv = v.size() == 3 * m.num_dofs();
+  std::vector<Vec24> fe(static_cast<std::size_t>(ne)), kve(want_kv ? std::size_t(ne) : 0);
+  m_impl->executor_ptr->parallel_for(ne, kGrain, [&](int b, int en) {
+    Vec24 xe;
+    Eigen::Matrix<double, 3, 8> xm;
+    for (int e = b; e < en; ++e) {
+      element_slots(slots, e, xe, xm);
+      const Mat3& R = frame.rotation[std::size_t(e)];
+      const Mat24 K = m_impl->element_k(e);
+      fe[std::size_t(e)] = corotated_force(K, R, xe, m_impl->rest[std::size_t(e)]);
+      if (want_kv) {
+        // K_rot v = R K R^T v, applied block-wise without forming K_rot.
+        const Vec24 ve = m_impl->element_vector(e, v);
+        Vec24 local;
+        for (int a = 0; a < 8; ++a) local.segment<3>(3 * a) = R.transpose() * ve.segment<3>(3 * a);
+        const Vec24 kl = K * local;
+        for (int a = 0; a < 8; ++a) kve[std::size_t(e)].segment<3>(3 * a) = R * kl.segment<3>(3 * a);
+      }
+    }
+  });
+  m_impl->gather_vectors(fe, f);
+  if (want_kv) m_impl->gather_vectors(kve, kv);
+}
+
+void FemSystem::elastic_force(const std::vector<Vec3>& x, const ElementFrame& frame, VecX& f) const {
+  VecX none, kv;
+  force_and_product(x, frame, none, f, kv);
+}
+
+double FemSystem::elastic_energy(const std::vector<Vec3>& x, const ElementFrame& frame) const {
+  const ObjectModel& m = m_impl->model();
+  std::vector<Vec3> slots;
+  prolong(x, slots);
+  double energy = 0.0;
+  Vec24 xe;
+  Eigen::Matrix<double, 3, 8> xm;
+  for (int e = 0; e < m.num_elements(); ++e) {
+    element_slots(slots, e, xe, xm);
+    const Mat3& R = frame.rotation[std::size_t(e)];
+    const Vec24 u = corotated_displacement(R, xe, m_impl->rest[std::size_t(e)]);
+    energy += 0.5 * u.dot(m_impl->element_k(e) * u);
+  }
+  return energy;
+}
+
+SpMat FemSystem::stiffness(const ElementFrame& frame) const {
+  const ObjectModel& m = m_impl->model();
+  std::vector<Eigen::Triplet<double>> t;
+  for (int e = 0; e < m.num_elements(); ++e) {
+    const Mat24 Ke = corotated_stiffness(m_impl->element_k(e), frame.rotation[std::size_t(e)]);
+    for (const GatherEntry& p : m_impl->gather[std::size_t(e)])
+      for (const GatherEntry& q : m_impl->gather[std::size_t(e)])
+        for (int r = 0; r < 3; ++r)
+          for (int c = 0; c < 3; ++c)
+            t.emplace_back(3 * p.dof + r, 3 * q.dof + c, p.w * q.w * Ke(3 * p.corner + r, 3 * q.corner + c));
+  }
+  SpMat K(3 * m.num_dofs(), 3 * m.num_dofs());
+  K.setFromTriplets(t.begin(), t.end());
+  return K;
+}
+
+void FemSystem::stiffness_product(const ElementFrame& frame, const VecX& v, VecX& out) const {
+  const ObjectModel& m = m_impl->model();
+  std::vector<Vec24> ke(std::size_t(m.num_elements()));
+  m_impl->executor_ptr->parallel_for(m.num_elements(), kGrain, [&](int b, int en) {
+    for (int e = b; e < en; ++e)
+      ke[std::size_t(e)] =
+          corotated_stiffness(m_impl->element_k(e), frame.rotation[std::size_t(e)]) * m_impl->element_vector(e, v);
+  });
+  m_impl->gather_vectors(ke, out);
+}
+
+const SpMat& FemSystem::system_pattern(const std::vector<char>& constrained) {
+  Impl& im = *m_impl;
+  if (!im.have_pattern || im.pattern_constrained != constrained) im.build_pattern(constrained);
+  return im.pattern;
+}
+
+void FemSystem::assemble_system(double mc, double kc, const ElementFrame& frame,
+                                const std::vector<char>& constrained, const VecX& u, SpMat& A, VecX& coupling) {
+  Impl& im = *m_impl;
+  const ObjectModel& m = im.model();
+  const int ne = m.num_elements();
+  const int nd = m.num_dofs();
+  if (!im.have_pattern || im.pattern_constrained != constrained) {
+    im.build_pattern(constrained);
+    A = im.pattern;
+  }
+  if (A.nonZeros() != im.pattern.nonZeros()) A = im.pattern;
+
+  // Rotated element stiffness, in parallel (independent per element).
+  im.rotated.resize(std::size_t(ne) * 576);
+  im.executor_ptr->parallel_for(ne, kGrain, [&](int b, int en) {
+    for (int e = b; e < en; ++e) {
+      Eigen::Map<Mat24> out(im.rotated.data() + 576 * std::size_t(e));
+      out = corotated_stiffness(kc * im.element_k(e), frame.rotation[std::size_t(e)]);
+    }
+  });
+
+  // Scatter in a fixed element order: deterministic sums.
+  double* val = A.valuePtr();
+  std::fill(val, val + A.nonZeros(), 0.0);
+  coupling.setZero(3 * nd);
+  for (int e = 0; e < ne; ++e) {
+    const Eigen::Map<const Mat24> Ke(im.rotated.data() + 576 * std::size_t(e));
+    const auto& g = im.gather[std::size_t(e)];
+    const int* off = im.pair_offsets.data() + im.pair_begin[std::size_t(e)];
+    for (const GatherEntry& p : g) {
+      for (const GatherEntry& q : g) {
+        const double w = p.w * q.w;
+        if (off[0] >= 0) {
+          for (int c = 0; c < 3; ++c) {
+            double* dst = val + off[c];
+            dst[0] += w * Ke(3 * p.corner + 0, 3 * q.corner + c);
+            dst[1] += w * Ke(3 * p.corner + 1, 3 * q.corner + c);
+            dst[2] += w * Ke(3 * p.corner + 2, 3 * q.corner + c);
+          }
+        } else if (!constrained[std::size_t(p.dof)]) {
+          // Free row, prescribed column: moves to the right-hand side.
+          coupling.segment<3>(3 * p.dof) +=
+              w * Ke.block<3, 3>(3 * p.corner, 3 * q.corner) * u.segment<3>(3 * q.dof);
+        }
+        off += 3;
+      }
+    }
+  }
+
+  // Lumped mass on the diagonal; identity rows for constrained DOFs.
+  for (int d = 0; d < nd; ++d) {
+    for (int c = 0; c < 3; ++c) {
+      const int i = 3 * d + c;
+      if (constrained[std::size_t(d)]) {
+        val[im.diag_offsets[std::size_t(i)]] = 1.0;
+      } else {
+        val[im.diag_offsets[std::size_t(i)]] += mc * m.dof_mass()[std::size_t(d)];
+      }
+    }
+  }
+}
+
+}  // namespace octocut::sim

@@ -317,7 +317,6 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
     cutting::CutObject cut_object;
     cut_object.surface = std::move(object->surface);
     cut_object.cut_faces.assign(cut_object.surface.triangles.size(), 0);
-    cut_object.graph = object->graph;
     cut_object.surface_checked = true;  // load_mesh rejects a self-intersecting S; a box cannot intersect itself
     cutting::index_surface(cut_object);  // the grid the cuts find S's faces near a blade with (O(|S|), once)
     const sim::TriMesh& surface = cut_object.surface;
@@ -326,6 +325,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
         report.warnings.push_back("/tools/" + std::to_string(i) +
                                   "/collide: tool contact is not implemented yet; the tool passes through tissue");
     sim::Simulator sim(std::move(object->model), simulator_options(scene));
+    object->graph.reset();  // M is held by the model alone (sim.model().material_graph())
     const sim::ObjectModel& m0 = sim.model();
     // Counts of the current revision and of S (at the start, and again at the end after the cuts).
     const auto record_counts = [&] {
@@ -334,7 +334,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
       report.elements = cut_object.removed ? 0 : m.num_elements();
       report.dofs = cut_object.removed ? 0 : m.num_dofs();
       report.hanging_slots = cut_object.removed ? 0 : m.dofs().hanging_slots;
-      report.tets = cut_object.graph ? cut_object.graph->num_tets() : 0;
+      report.tets = cut_object.removed || !m.material_graph() ? 0 : m.material_graph()->num_tets();
       report.surface_vertices = long(surface.num_vertices());
       report.surface_triangles = long(surface.num_triangles());
       const sim::SurfaceCheck check = sim::check_surface(surface);
@@ -357,7 +357,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
                                 "equilibrium (rigid motions are free)");
     // S embedded in T by the Z-curve list (SPEC §2.4); the deformed surface follows the DOFs.
     sim::Executor surface_exec(scene.solver.threads);
-    sim::SurfaceEmbedding embedding(m0, surface.vertices, surface.triangles);
+    sim::SurfaceEmbedding embedding(m0, surface);
     if (embedding.num_fallback() > 0)
       report.warnings.push_back(std::to_string(embedding.num_fallback()) +
                                 " surface vertices lie outside every leaf and are bound to the nearest one");
@@ -370,7 +370,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
         return;
       }
       embedding.deformed_positions(sim.state().x, deformed, surface_exec);
-      embedding.deformed_normals(deformed, deformed_normals, surface_exec);
+      embedding.deformed_normals(surface, deformed, deformed_normals, surface_exec);
     };
     update_surface();
     auto write_surface = [&](const fs::path& path) {
@@ -400,7 +400,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
       m.dofs().prolong(sim.state().x, slots);
       if (cut_object.removed) {
         // Nothing left to draw of the tissue.
-      } else if (!cut_object.graph) {
+      } else if (!m.material_graph()) {
         rs.meshes.push_back(tissue_mesh(m, tissue, slots));
       } else {
         // The mesh surface S as the Z-curve embedding moved it after the last step, cut faces tinted.
@@ -443,7 +443,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
     };
     if (rendering) {
       // A box primitive's 12 triangles would shade flat under deformation: draw it as a finer grid of its faces.
-      if (!cut_object.graph) tissue = embed_surface(m0, box_surface(box3(scene.object.surface_box), 32));
+      if (!m0.material_graph()) tissue = embed_surface(m0, box_surface(box3(scene.object.surface_box), 32));
       camera = make_camera(scene.render.camera, sim::bounds(surface));
       if (scene.output.frames) {
         const fs::path frames_dir = out / "frames";

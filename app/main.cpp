@@ -95,7 +95,7 @@ int cmd_validate(const std::string& scene_path, const std::vector<std::string>& 
   const sim::ObjectModel& m = o.model;
   std::printf("%s: ok (%d elements, %d DOFs, %d hanging slots; surface %zu vertices, %zu triangles; %d tets)\n",
               scene_path.c_str(), m.num_elements(), m.num_dofs(), m.dofs().hanging_slots, o.surface.num_vertices(),
-              o.surface.num_triangles(), o.graph ? o.graph->num_tets() : 0);
+              o.surface.num_triangles(), m.material_graph() ? m.material_graph()->num_tets() : 0);
   if (!props.empty()) std::printf("%s: %zu render props loaded\n", scene_path.c_str(), props.size());
   for (const engine::ToolSummary& t : engine::validate_tools(scene)) {
     std::printf("tool %s: blade %s (%zu vertices, %zu triangles, %.6g m^3); mesh %zu triangles; %zu keyframes, "

@@ -1,13 +1,15 @@
 #include "octocut/cutting/cutting.hpp"
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <functional>
 #include <future>
+#include <iterator>
 #include <numeric>
 #include <optional>
+#include <span>
 #include <stdexcept>
+#include <string>
 #include <system_error>
 #include <thread>
 
@@ -16,17 +18,14 @@
 #include "octocut/cutting/surface_cut.hpp"
 #include "octocut/sim/dof_map.hpp"
 #include "octocut/sim/disjoint_sets.hpp"
+#include "octocut/sim/timing.hpp"
 
 namespace octocut::cutting {
 
-bool pipeline_available() { return true; }
-
 namespace {
 
-using Clock = std::chrono::steady_clock;
-double ms_since(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
+using sim::Clock;
+using sim::ms_since;
 
 using UnionFind = sim::DisjointSets;  // union-find; the root of a set is its smallest member
 
@@ -143,17 +142,122 @@ struct StageFailure : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// ---- 1. back_transform ---------------------------------------------------------------------------------------------
+
+// The rest-space blades of stage 1 (B'_i, one per touched material component) and what each must not cut.
+struct RestBlades {
+  std::vector<sim::TriMesh> blades;        ///< closed, outward-oriented, rest space, m
+  std::vector<std::vector<char>> foreign;  ///< per blade: the leaves it must not cut (see foreign_leaves)
+};
+
+// The elements whose deformed hexahedra (`slots`: 8 deformed corners per element, m) meet the blade, ascending.
+// Throws StageFailure when the deformed state is not finite.
+std::vector<int> touched_elements(const sim::ObjectModel& model, const std::vector<sim::Vec3>& slots,
+                                  const BladeVolume& blade) {
+  const sim::Box3 blade_box = blade.bounds();
+  std::vector<int> touched;
+  for (int e = 0; e < model.num_elements(); ++e) {
+    std::array<sim::Vec3, 8> c;
+    sim::Box3 hb{sim::Vec3::Constant(INFINITY), sim::Vec3::Constant(-INFINITY)};
+    bool finite = true;
+    for (int k = 0; k < 8; ++k) {
+      c[std::size_t(k)] = slots[8 * std::size_t(e) + std::size_t(k)];
+      finite = finite && c[std::size_t(k)].allFinite();
+      hb.min = hb.min.cwiseMin(c[std::size_t(k)]);
+      hb.max = hb.max.cwiseMax(c[std::size_t(k)]);
+    }
+    if (!finite) throw StageFailure("back_transform: the deformed state is not finite");
+    if (boxes_overlap(hb, blade_box) && blade.overlaps_hexahedron(c)) touched.push_back(e);
+  }
+  return touched;
+}
+
+// The touched elements grouped into components: touched leaves that share a face through which material connects.
+// Components come in the order of their first element, each ascending.
+std::vector<std::vector<int>> touched_components(const sim::ObjectModel& model, const std::vector<int>& touched) {
+  UnionFind uf = material_groups(model, touched);
+  std::vector<std::vector<int>> groups;
+  std::vector<int> gid(touched.size(), -1);
+  for (std::size_t i = 0; i < touched.size(); ++i) {
+    const int r = uf.find(int(i));
+    if (gid[std::size_t(r)] < 0) {
+      gid[std::size_t(r)] = int(groups.size());
+      groups.emplace_back();
+    }
+    groups[std::size_t(gid[std::size_t(r)])].push_back(touched[i]);
+  }
+  return groups;
+}
+
+// The blade of one component in rest space: the request's blade mapped back by the component's shape-matching
+// affine map (its slots' rest and deformed positions, weighted by material volume). Raises out.max_blend. Throws
+// StageFailure when shape matching fails.
+sim::TriMesh rest_blade(const sim::ObjectModel& model, const std::vector<sim::Vec3>& slots,
+                        const std::vector<int>& component, const CutRequest& request, const CutOptions& options,
+                        CutOutcome& out) {
+  std::vector<sim::Vec3> rest, deformed;
+  std::vector<double> weights;
+  for (int e : component) {
+    const double h = model.edge()[std::size_t(e)];
+    const double w = model.occupancy()[std::size_t(e)] * h * h * h / 8.0;
+    for (int k = 0; k < 8; ++k) {
+      rest.push_back(model.slot_rest()[8 * std::size_t(e) + std::size_t(k)]);
+      deformed.push_back(slots[8 * std::size_t(e) + std::size_t(k)]);
+      weights.push_back(w);
+    }
+  }
+  ShapeMatch match;
+  try {
+    match = shape_match(rest, deformed, weights, options.max_condition);
+  } catch (const std::invalid_argument& e) {
+    throw StageFailure(std::string("back_transform: shape matching failed: ") + e.what());
+  }
+  out.max_blend = std::max(out.max_blend, match.blend);
+  sim::TriMesh blade = to_rest(match, request.blade);
+  // A back-transform that moves no vertex by more than rounding (an object at rest) is the identity: the blade is
+  // used as given, so that repeated cuts at rest meet earlier cut faces exactly, not 1e-19 m off.
+  double moved = 0.0;
+  for (std::size_t v = 0; v < blade.vertices.size(); ++v)
+    moved = std::max(moved, (blade.vertices[v] - request.blade.vertices[v]).cwiseAbs().maxCoeff());
+  if (moved <= 1e-12 * model.root().size) blade = request.blade;
+  return blade;
+}
+
+// Stage 1: the leaves whose deformed hexahedra meet the blade, grouped into face- and material-connected
+// components; per component a shape-matching affine map takes the blade into rest space (B'_i), restricted to the
+// component's material (foreign_leaves). No blade when the blade meets no element. Throws StageFailure.
+RestBlades back_transform(const sim::ObjectModel& model, const sim::SimState& state, const CutRequest& request,
+                          const CutOptions& options, CutOutcome& out) {
+  const BladeVolume blade(request.blade);
+  std::vector<sim::Vec3> slots;
+  model.dofs().prolong(state.x, slots);
+  const std::vector<int> touched = touched_elements(model, slots, blade);
+  if (touched.empty()) return {};
+  const std::vector<std::vector<int>> groups = touched_components(model, touched);
+  out.components = int(groups.size());
+  RestBlades rest;
+  for (const std::vector<int>& g : groups) {
+    sim::TriMesh b = rest_blade(model, slots, g, request, options, out);
+    rest.foreign.push_back(foreign_leaves(model, BladeVolume(b), g));
+    if (!rest.foreign.back().empty()) ++out.restricted_components;
+    rest.blades.push_back(std::move(b));
+  }
+  return rest;
+}
+
+// ---- 3. material_graph, 4. refine and node_split (the model stages) --------------------------------------------------
+
 // What stages 3 and 4 and the solver preparation produce (see run_model_stages).
 struct ModelWork {
   std::string error;                                ///< why a stage failed; empty when none did
   bool dead_empty = true;                           ///< the blades touch no tet of M
   int tets_removed = 0, leaves_refined = 0, fragments_removed = 0;
   double fragment_volume = 0.0;                     ///< m^3
-  std::shared_ptr<const sim::MaterialGraph> graph;  ///< M after the cut
   bool all_gone = false;                            ///< no material is left
   std::vector<int> fragment_leaves;                 ///< leaves of *before_fragments that the fragments held
   std::optional<sim::ObjectModel> before_fragments; ///< the split model, kept only when fragments go
-  std::shared_ptr<const sim::ObjectModel> next;     ///< the new revision; null when no material is left
+  std::shared_ptr<const sim::ObjectModel> next;     ///< the new revision, which holds M after the cut; null when no
+                                                    ///< material is left
   double ms_material_graph = 0.0, ms_refine = 0.0, ms_node_split = 0.0;
   // The second phase, after model_ready: only read once the model thread has been joined.
   std::string prepare_error;                        ///< why prepare_model failed; empty when it did not
@@ -162,28 +266,21 @@ struct ModelWork {
   double ms_prepare = 0.0;
 };
 
-// Stages 3 (material graph) and 4 (refine, node split, fragments), then the new revision's FEM system, carried-over
-// state and symbolic analysis (the solver part of stage 5), for the rest-space blades. Reads the simulator and M,
-// changes nothing. Calls model_ready() once everything but the preparation is in `w` (from then on the caller may
-// read those fields while the preparation runs), and skips the preparation when cancelled() says so. Throws
-// StageFailure.
-void run_model_stages(ModelWork& w, const std::vector<sim::TriMesh>& blades,
-                      const std::vector<std::vector<char>>& foreign,
-                      const std::shared_ptr<const sim::MaterialGraph>& material_ptr,
-                      const sim::ObjectModel& model, const sim::Simulator& simulator, const CutOptions& options,
-                      double inscribed_radius, const std::function<void()>& model_ready,
-                      const std::function<bool()>& cancelled) {
-  const sim::RootGeometry& root = model.root();
-  const sim::MaterialGraph& material = *material_ptr;
-  // ---- 3. material_graph -------------------------------------------------------------------------------------------
-  auto t0 = Clock::now();
-  std::vector<int> dead;
-  std::vector<sim::Box3> changed;
-  std::vector<BladeVolume> rest_volumes;
-  for (std::size_t k = 0; k < blades.size(); ++k) {
-    rest_volumes.emplace_back(blades[k]);
-    std::vector<int> tets = tets_touched(material, rest_volumes.back());
-    // Only the tets of the blade's own component (by the leaf that holds their centroid).
+// Stage 3's result: the tets of M that the blades remove, and M without them.
+struct DeadTets {
+  std::vector<int> tets;                            ///< ascending, each once
+  std::vector<sim::Box3> changed;                   ///< rest-space boxes that cover them, m (one per blade)
+  std::shared_ptr<const sim::MaterialGraph> graph;  ///< M without them; null when none dies
+};
+
+// Stage 3: the tets of M (`material`) that meet a rest-space blade, each blade's own component's only (by the leaf
+// that holds the tet's centroid), removed from M.
+DeadTets material_graph_stage(const sim::ObjectModel& model, const sim::MaterialGraph& material,
+                              const std::vector<BladeVolume>& rest_volumes,
+                              const std::vector<std::vector<char>>& foreign) {
+  DeadTets dead;
+  for (std::size_t k = 0; k < rest_volumes.size(); ++k) {
+    std::vector<int> tets = tets_touched(material, rest_volumes[k]);
     std::erase_if(tets, [&](int t) {
       const std::array<sim::Vec3, 4> p = material.tet(t);
       return in_foreign(model, foreign[k], 0.25 * (p[0] + p[1] + p[2] + p[3]));
@@ -193,23 +290,23 @@ void run_model_stages(ModelWork& w, const std::vector<sim::TriMesh>& blades,
     for (int t : tets) {
       for (const sim::Vec3& p : material.tet(t)) region = grow(region, {p, p});
     }
-    changed.push_back(region);
-    dead.insert(dead.end(), tets.begin(), tets.end());
+    dead.changed.push_back(region);
+    dead.tets.insert(dead.tets.end(), tets.begin(), tets.end());
   }
-  std::sort(dead.begin(), dead.end());
-  dead.erase(std::unique(dead.begin(), dead.end()), dead.end());
-  w.tets_removed = int(dead.size());
-  w.dead_empty = dead.empty();
-  std::shared_ptr<const sim::MaterialGraph> graph =
-      dead.empty() ? material_ptr : material.without(dead);
-  w.ms_material_graph = ms_since(t0);
+  std::sort(dead.tets.begin(), dead.tets.end());
+  dead.tets.erase(std::unique(dead.tets.begin(), dead.tets.end()), dead.tets.end());
+  if (!dead.tets.empty()) dead.graph = material.without(dead.tets);
+  return dead;
+}
 
-  // ---- 4. refine, then node_split ----------------------------------------------------------------------------------
-  t0 = Clock::now();
+// Stage 4, refine: the leaves that meet a rest-space blade (outside its foreign material) with an edge above
+// l_e = r / sqrt(3), level after level, refined in one revision. When tets die, that revision takes the new
+// material too: the leaves the cut touches are measured once and the DOFs split in the same update.
+sim::ObjectModel refine_stage(const sim::ObjectModel& model, const std::vector<BladeVolume>& rest_volumes,
+                              const std::vector<std::vector<char>>& foreign, const DeadTets& dead,
+                              double inscribed_radius, int& leaves_refined) {
+  const sim::RootGeometry& root = model.root();
   const double le = inscribed_radius / std::sqrt(3.0);
-  // Leaves that meet a rest-space blade with an edge above l_e, level after level, refined in one revision. When
-  // tets go, that revision takes the new material too: the leaves the cut touches are measured once and the DOFs
-  // are split in the same update, so with_material below finds its work done.
   auto meets_blade = [&](const sim::Cell& c) {
     if (c.level >= model.max_level() || !(root.cell_edge(c) > le)) return false;
     const sim::Box3 box = root.cell_box(c);
@@ -221,47 +318,53 @@ void run_model_stages(ModelWork& w, const std::vector<sim::TriMesh>& blades,
     }
     return false;
   };
-  sim::ObjectModel next = !dead.empty() && graph->num_tets() > 0
-                              ? model.refined_with_material(meets_blade, graph, changed, &w.leaves_refined)
-                              : model.refined_where(meets_blade, &w.leaves_refined);
-  w.ms_refine = ms_since(t0);
+  return dead.graph && dead.graph->num_tets() > 0
+             ? model.refined_with_material(meets_blade, dead.graph, dead.changed, &leaves_refined)
+             : model.refined_where(meets_blade, &leaves_refined);
+}
 
-  t0 = Clock::now();
-  if (!dead.empty()) {
-    if (graph->num_tets() == 0) {
+// The loose pieces of `next` to remove per options.fragments: components of elements that no handle holds (without
+// any handle, the largest piece counts as the body and only the others are loose). Counts them into w and returns
+// their leaves, ascending.
+std::vector<int> loose_fragments(const sim::ObjectModel& next, const CutOptions& options, ModelWork& w) {
+  int count = 0;
+  const std::vector<int> comp = sim::element_components(next, count);
+  if (count <= 1) return {};
+  const std::vector<sim::ComponentInfo> info = sim::component_info(next, comp, count);
+  const bool any_anchor = std::any_of(info.begin(), info.end(), [](const auto& c) { return c.anchored; });
+  int body = -1;
+  if (!any_anchor) {
+    body = 0;
+    for (int c = 1; c < count; ++c)
+      if (info[std::size_t(c)].volume > info[std::size_t(body)].volume) body = c;
+  }
+  std::vector<char> remove(std::size_t(count), 0);
+  for (int c = 0; c < count; ++c) {
+    const auto& ci = info[std::size_t(c)];
+    if (ci.anchored || c == body) continue;
+    if (options.fragments == FragmentPolicy::small && !(ci.volume < options.fragment_volume)) continue;
+    remove[std::size_t(c)] = 1;
+    ++w.fragments_removed;
+    w.fragment_volume += ci.volume;
+  }
+  std::vector<int> leaves;
+  for (int e = 0; e < next.num_elements(); ++e)
+    if (remove[std::size_t(comp[std::size_t(e)])]) leaves.push_back(e);
+  return leaves;
+}
+
+// Stage 4, node_split: the refined revision takes M without the dead tets (DOFs split where the material no longer
+// connects), then the loose fragments go per options. Fills w.all_gone, the fragment fields and w.next.
+void node_split_stage(sim::ObjectModel next, const DeadTets& dead, const CutOptions& options, ModelWork& w) {
+  if (!dead.tets.empty()) {
+    if (dead.graph->num_tets() == 0) {
       w.all_gone = true;
     } else {
-      next = next.with_material(graph, changed);
+      next = next.with_material(dead.graph, dead.changed);
       w.all_gone = next.num_elements() == 0;
     }
   }
-  // Loose pieces: components of elements that no handle holds. Without any handle, the largest piece counts as
-  // the body and only the others are loose.
-  if (!w.all_gone && options.fragments != FragmentPolicy::none) {
-    int count = 0;
-    const std::vector<int> comp = sim::element_components(next, count);
-    if (count > 1) {
-      const std::vector<sim::ComponentInfo> info = sim::component_info(next, comp, count);
-      const bool any_anchor = std::any_of(info.begin(), info.end(), [](const auto& c) { return c.anchored; });
-      int body = -1;
-      if (!any_anchor) {
-        body = 0;
-        for (int c = 1; c < count; ++c)
-          if (info[std::size_t(c)].volume > info[std::size_t(body)].volume) body = c;
-      }
-      std::vector<char> remove(std::size_t(count), 0);
-      for (int c = 0; c < count; ++c) {
-        const auto& ci = info[std::size_t(c)];
-        if (ci.anchored || c == body) continue;
-        if (options.fragments == FragmentPolicy::small && !(ci.volume < options.fragment_volume)) continue;
-        remove[std::size_t(c)] = 1;
-        ++w.fragments_removed;
-        w.fragment_volume += ci.volume;
-      }
-      for (int e = 0; e < next.num_elements(); ++e)
-        if (remove[std::size_t(comp[std::size_t(e)])]) w.fragment_leaves.push_back(e);
-    }
-  }
+  if (!w.all_gone && options.fragments != FragmentPolicy::none) w.fragment_leaves = loose_fragments(next, options, w);
   if (!w.fragment_leaves.empty()) {
     if (w.fragment_leaves.size() == std::size_t(next.num_elements())) {
       w.all_gone = true;
@@ -272,17 +375,434 @@ void run_model_stages(ModelWork& w, const std::vector<sim::TriMesh>& blades,
       next = std::move(rest);
     }
   }
-  w.graph = std::move(graph);
   if (!w.all_gone) w.next = std::make_shared<const sim::ObjectModel>(std::move(next));
+}
+
+// Stages 3 (material graph) and 4 (refine, node split, fragments), then the new revision's FEM system, carried-over
+// state and symbolic analysis (the solver part of stage 5), for the rest-space blades. Reads the simulator and M
+// (through its model), changes nothing. Calls model_ready() once everything but the preparation is in `w` (from
+// then on the caller may read those fields while the preparation runs), and skips the preparation when cancelled()
+// says so. Throws StageFailure.
+void run_model_stages(ModelWork& w, const std::vector<sim::TriMesh>& blades,
+                      const std::vector<std::vector<char>>& foreign, const sim::Simulator& simulator,
+                      const CutOptions& options, double inscribed_radius, const std::function<void()>& model_ready,
+                      const std::function<bool()>& cancelled) {
+  const sim::ObjectModel& model = simulator.model();
+  auto t0 = Clock::now();
+  std::vector<BladeVolume> rest_volumes(blades.begin(), blades.end());
+  const DeadTets dead = material_graph_stage(model, *model.material_graph(), rest_volumes, foreign);
+  w.tets_removed = int(dead.tets.size());
+  w.dead_empty = dead.tets.empty();
+  w.ms_material_graph = ms_since(t0);
+
+  t0 = Clock::now();
+  sim::ObjectModel next = refine_stage(model, rest_volumes, foreign, dead, inscribed_radius, w.leaves_refined);
+  w.ms_refine = ms_since(t0);
+
+  t0 = Clock::now();
+  node_split_stage(std::move(next), dead, options, w);
   w.ms_node_split = ms_since(t0);
   model_ready();
 
-  // ---- 5. (the solver part) -----------------------------------------------------------------------------------------
+  // The solver part of stage 5.
   if (w.all_gone || cancelled()) return;
   t0 = Clock::now();
   w.prepared = simulator.prepare_model(*w.next, true);  // a copy: the caller reads *w.next meanwhile
   w.have_prepared = true;
   w.ms_prepare = ms_since(t0);
+}
+
+// The model stages on a second thread (the model thread) while this one cuts S (stage 2): they read only M, T, the
+// state and the rest-space blades, never S. Once the new revision is known, that thread prepares its FEM system and
+// symbolic analysis while this one updates the embedding. Nothing is committed before both are done, and the
+// results do not depend on the interleaving. Without a thread to be had, the stages run here at once. On every way
+// out, the destructor asks the thread to skip the preparation and joins it.
+class ModelStages {
+ public:
+  ModelStages(const sim::Simulator& simulator, const CutOptions& options, double inscribed_radius,
+              const RestBlades& rest)
+      : m_simulator(simulator), m_options(options), m_radius(inscribed_radius), m_known(m_ready.get_future()) {
+    // The thread holds `this`: a ModelStages never moves.
+    try {
+      m_thread = std::jthread([this, blades = rest.blades, foreign = rest.foreign](std::stop_token stop) {
+        run(blades, foreign, &m_ready, [stop] { return stop.stop_requested(); });
+      });
+    } catch (const std::system_error&) {
+      run(rest.blades, rest.foreign, &m_ready, [] { return false; });
+    }
+  }
+
+  ModelStages(const ModelStages&) = delete;
+  ModelStages& operator=(const ModelStages&) = delete;
+  ~ModelStages() = default;
+
+  // Stages 3 and 4 as the model thread ran them, once they are done (the preparation may still run).
+  ModelWork& model_known() {
+    m_known.wait();
+    return m_work;
+  }
+
+  // Stages 3 and 4 run again, here, with the blades and restrictions the surface stage used; the first run is
+  // stopped and joined.
+  ModelWork& rerun(const RestBlades& rest) {
+    m_thread.request_stop();
+    if (m_thread.joinable()) m_thread.join();
+    m_work = ModelWork{};
+    run(rest.blades, rest.foreign, nullptr, [] { return false; });
+    return m_work;
+  }
+
+  // Everything, the preparation included: the thread is joined.
+  ModelWork& finished() {
+    if (m_thread.joinable()) m_thread.join();
+    return m_work;
+  }
+
+ private:
+  // run_model_stages into m_work, its error kept as the reason of the stage it stopped (or of the preparation).
+  void run(const std::vector<sim::TriMesh>& blades, const std::vector<std::vector<char>>& foreign,
+           std::promise<void>* ready, const std::function<bool()>& cancelled) {
+    bool signalled = false;
+    const auto signal = [&] {
+      if (signalled) return;
+      signalled = true;
+      if (ready) ready->set_value();
+    };
+    try {
+      run_model_stages(m_work, blades, foreign, m_simulator, m_options, m_radius, signal, cancelled);
+    } catch (const std::exception& e) {
+      std::string why = dynamic_cast<const StageFailure*>(&e) ? e.what() : std::string("unexpected error: ") + e.what();
+      (signalled ? m_work.prepare_error : m_work.error) = std::move(why);
+    }
+    signal();
+  }
+
+  const sim::Simulator& m_simulator;
+  const CutOptions& m_options;
+  double m_radius;             ///< the blade's inscribed radius, m
+  ModelWork m_work;
+  std::promise<void> m_ready;  ///< set once stages 3 and 4 are in m_work
+  std::future<void> m_known;
+  std::jthread m_thread;       ///< declared last: stopped and joined before the members it uses go
+};
+
+// Stages 3 and 4 for the blades as stage 2 used them: a perturbed blade removes material where it now is, and one
+// whose restriction was dropped removes all the material under it, so then they run again, here. Their figures go
+// into `out`; throws StageFailure with their error.
+ModelWork& model_stages_done(ModelStages& stages, RestBlades& rest, const std::vector<char>& unrestricted,
+                             CutOutcome& out) {
+  ModelWork* work = &stages.model_known();
+  if (out.perturbed > 0 || out.unrestricted > 0) {
+    for (std::size_t k = 0; k < unrestricted.size(); ++k) {
+      if (unrestricted[k]) rest.foreign[k].clear();
+    }
+    work = &stages.rerun(rest);
+  }
+  if (!work->error.empty()) throw StageFailure(work->error);
+  out.tets_removed = work->tets_removed;
+  out.leaves_refined = work->leaves_refined;
+  out.fragments_removed = work->fragments_removed;
+  out.fragment_volume = work->fragment_volume;
+  out.ms.material_graph = work->ms_material_graph;
+  out.ms.refine = work->ms_refine;
+  out.ms.node_split = work->ms_node_split;
+  return *work;
+}
+
+// ---- 2. surface ----------------------------------------------------------------------------------------------------
+
+// The edits of one cut to S, as a transaction. The editor edits S in place (its grid finds the faces near each
+// blade) and journals every edit; vertices that no triangle uses any more stay in S until compact() removes them.
+// Unless commit() is called, the destructor undoes the compaction and then rolls the journal back: S, its grid and
+// CutObject::cut_faces are as they were.
+class SurfaceTransaction {
+ public:
+  // Throws StageFailure when S has to be indexed (the caller did not) and is invalid.
+  explicit SurfaceTransaction(CutObject& object)
+      : m_object(indexed(object)), m_editor(m_object.surface, *m_object.grid.grid, &m_object.cut_faces),
+        m_vertices_before(m_object.surface.vertices.size()) {}
+  SurfaceTransaction(const SurfaceTransaction&) = delete;
+  SurfaceTransaction& operator=(const SurfaceTransaction&) = delete;
+  ~SurfaceTransaction() {
+    if (m_committed) return;
+    if (m_compacted) uncompact();
+    m_editor.rollback(0);
+  }
+
+  [[nodiscard]] SurfaceEditor& editor() { return m_editor; }
+
+  // Removes from S the vertices `unused` (ascending) that no triangle uses: the others move down in order (no
+  // allocation; room stays for the next cuts) and the triangles are renumbered in place. Returns the embedding's
+  // edit: the removed vertices that S had before this cut, and the number of vertices this cut added that stay.
+  sim::SurfaceEdit compact(std::span<const int32_t> unused) {
+    std::vector<sim::Vec3>& vs = m_object.surface.vertices;
+    sim::SurfaceEdit edit;
+    m_unused.assign(unused.begin(), unused.end());
+    m_unused_positions.clear();
+    for (const int32_t v : unused) {
+      m_unused_positions.push_back(vs[std::size_t(v)]);
+      if (std::size_t(v) < m_vertices_before) edit.removed_vertices.push_back(int(v));
+    }
+    edit.inserted = int(vs.size() - m_vertices_before) - int(unused.size() - edit.removed_vertices.size());
+    if (unused.empty()) return edit;
+    // The new index of each vertex after the first unused one, -1 for an unused one.
+    const auto n = int32_t(vs.size());
+    const int32_t first = unused.front();
+    std::vector<int32_t> old_to_new(std::size_t(n - first));
+    int32_t next = first;
+    std::size_t u = 0;
+    for (int32_t v = first; v < n; ++v) {
+      const bool gone = u < unused.size() && unused[u] == v;
+      u += gone ? 1 : 0;
+      old_to_new[std::size_t(v - first)] = gone ? -1 : next++;
+    }
+    for (int32_t v = first + 1; v < n; ++v) {
+      const int32_t to = old_to_new[std::size_t(v - first)];
+      if (to >= 0) vs[std::size_t(to)] = vs[std::size_t(v)];
+    }
+    vs.resize(vs.size() - unused.size());
+    for (auto& t : m_object.surface.triangles)
+      for (int32_t& v : t)
+        if (v > first) v = old_to_new[std::size_t(v - first)];
+    m_compacted = true;
+    return edit;
+  }
+
+  // Keeps the edits; the grid's triangles keep their indices and their vertices their positions.
+  void commit() {
+    m_editor.commit();
+    m_committed = true;
+    m_object.grid.vertices = m_object.surface.vertices.size();
+    m_object.grid.triangles = m_object.surface.triangles.size();
+  }
+
+ private:
+  // The object, its grid over S built first when the caller did not build it (O(|S|)).
+  static CutObject& indexed(CutObject& object) {
+    if (!surface_indexed(object)) {
+      try {
+        index_surface(object);
+      } catch (const std::invalid_argument& e) {
+        throw StageFailure(std::string("surface: ") + e.what());
+      }
+    }
+    return object;
+  }
+
+  // Undoes compact(): the kept vertices move back up (back to front, so that none overwrites one not yet moved),
+  // the unused ones come back, and the triangles get their old indices again.
+  void uncompact() {
+    std::vector<sim::Vec3>& vs = m_object.surface.vertices;
+    const int32_t first = m_unused.front();
+    const std::size_t n = vs.size() + m_unused.size();
+    std::vector<int32_t> new_to_old;  // for the new indices from `first` on
+    for (int32_t v = first, u = 0; v < int32_t(n); ++v) {
+      if (std::size_t(u) < m_unused.size() && m_unused[std::size_t(u)] == v)
+        ++u;
+      else
+        new_to_old.push_back(v);
+    }
+    for (auto& t : m_object.surface.triangles)
+      for (int32_t& v : t)
+        if (v >= first) v = new_to_old[std::size_t(v - first)];
+    vs.resize(n);
+    std::size_t u = m_unused.size();
+    for (int32_t v = int32_t(n) - 1; v >= first; --v) {
+      if (u > 0 && m_unused[u - 1] == v) {
+        vs[std::size_t(v)] = m_unused_positions[--u];
+      } else {
+        vs[std::size_t(v)] = vs[std::size_t(v) - u];
+      }
+    }
+    m_compacted = false;
+  }
+
+  CutObject& m_object;  ///< declared first: indexed before the editor is made
+  SurfaceEditor m_editor;
+  std::size_t m_vertices_before;            ///< S.vertices[0, m_vertices_before) are those S had before the cut
+  bool m_committed = false;
+  bool m_compacted = false;
+  std::vector<int32_t> m_unused;            ///< compact(): the vertices it removed, ascending
+  std::vector<sim::Vec3> m_unused_positions;  ///< compact(): their positions, m
+};
+
+// What stage 2 did to S.
+struct SurfaceCut {
+  std::vector<int32_t> unused;     ///< vertices of S that no triangle uses any more, ascending
+  bool changed = false;            ///< S changed
+  std::vector<char> unrestricted;  ///< per blade: its restriction was dropped
+};
+
+// S \ B'_k through the editor, for blade k of `rest` (moved in place when it had to be perturbed). The restriction
+// decides per region of S and of the blade, by one point each, and leaves are coarser than S: where a region
+// straddles the border of the foreign material, the kept pieces need not close up and the boolean refuses its
+// result. B'_k then cuts without the restriction (as if nothing were foreign), cut.unrestricted[k] says so, and the
+// model stages must run again without it too. Throws StageFailure when the boolean fails.
+SurfaceEditResult cut_with_blade(SurfaceEditor& editor, const sim::ObjectModel& model, RestBlades& rest,
+                                 std::size_t k, SurfaceCutOptions& sopt, SurfaceCut& cut, CutOutcome& out) {
+  sim::TriMesh& b = rest.blades[k];
+  sopt.removable = nullptr;
+  if (!rest.foreign[k].empty())
+    sopt.removable = [&model, &f = rest.foreign[k]](const sim::Vec3& p) { return !in_foreign(model, f, p); };
+  // A degenerate configuration that the boolean refuses is retried with the blade moved by 1e-9, then 1e-7, of its
+  // size; the blade that was used is the one the model stages must use too. A failed attempt leaves S as it was.
+  auto [r, moves] = cut_surface_in_place_perturbing(editor, b, sopt);
+  if (r.status == SurfaceCutStatus::failed && sopt.removable) {
+    sopt.removable = nullptr;
+    sim::TriMesh unrestricted_blade = b;
+    auto [again, again_moves] = cut_surface_in_place_perturbing(editor, unrestricted_blade, sopt);
+    if (again.status != SurfaceCutStatus::failed) {
+      b = std::move(unrestricted_blade);
+      r = std::move(again);
+      moves = again_moves;
+      cut.unrestricted[k] = 1;
+      ++out.unrestricted;
+      --out.restricted_components;
+    }
+  }
+  if (moves > 0) ++out.perturbed;
+  if (r.status == SurfaceCutStatus::failed) throw StageFailure("surface: " + r.reason);
+  return std::move(r);
+}
+
+// Stage 2: S <- S \ B'_i for each rest blade in turn, in place (the editor journals the edits).
+SurfaceCut surface_stage(SurfaceEditor& editor, const CutObject& object, const sim::ObjectModel& model,
+                         RestBlades& rest, const CutOptions& options, CutOutcome& out) {
+  SurfaceCut cut;
+  cut.unrestricted.assign(rest.blades.size(), 0);
+  SurfaceCutOptions sopt;
+  sopt.verify = options.verify;
+  sopt.check_blade_self_intersection = false;  // blades are checked when loaded (or built convex)
+  // S checked once, and changed since only by verified cuts (which check every changed face against its
+  // neighbours), stays free of self-intersections: CGAL need not check it again.
+  sopt.check_surface_self_intersection = !object.surface_checked;
+  for (std::size_t k = 0; k < rest.blades.size(); ++k) {
+    if (editor.mesh().triangles.empty()) break;
+    const SurfaceEditResult r = cut_with_blade(editor, model, rest, k, sopt, cut, out);
+    if (r.status == SurfaceCutStatus::no_op) continue;
+    out.removed_volume += r.removed_volume;
+    std::vector<int32_t> merged;
+    merged.reserve(cut.unused.size() + r.removed_vertices.size());
+    std::merge(cut.unused.begin(), cut.unused.end(), r.removed_vertices.begin(), r.removed_vertices.end(),
+               std::back_inserter(merged));
+    cut.unused = std::move(merged);
+    cut.changed = true;
+  }
+  return cut;
+}
+
+// The surface parts that lie in the removed fragments go with them: each component of S whose vertices mostly lie
+// in the leaves `fragment_leaves` of `split` (the model before the fragments went). When S changes, cut.unused
+// lists again every vertex that no triangle uses.
+void remove_fragment_surface(SurfaceEditor& editor, const sim::ObjectModel& split,
+                             const std::vector<int>& fragment_leaves, SurfaceCut& cut) {
+  std::vector<char> gone_leaf(std::size_t(split.num_elements()), 0);
+  for (int e : fragment_leaves) gone_leaf[std::size_t(e)] = 1;
+  int ncomp = 0;
+  const sim::TriMesh& current = editor.mesh();
+  const std::vector<int> tcomp = triangle_components(current, ncomp);
+  std::vector<int> in_gone(std::size_t(ncomp), 0), total(std::size_t(ncomp), 0);
+  std::vector<char> seen(current.vertices.size(), 0);
+  for (std::size_t f = 0; f < current.triangles.size(); ++f) {
+    for (int32_t v : current.triangles[f]) {
+      if (seen[std::size_t(v)]) continue;
+      seen[std::size_t(v)] = 1;
+      ++total[std::size_t(tcomp[f])];
+      const auto pe = split.embed(current.vertices[std::size_t(v)]);
+      if (pe && gone_leaf[std::size_t(pe->leaf)]) ++in_gone[std::size_t(tcomp[f])];
+    }
+  }
+  std::vector<int32_t> drop;  // triangles of the removed components, ascending
+  for (std::size_t f = 0; f < current.triangles.size(); ++f) {
+    const int c = tcomp[f];
+    if (2 * in_gone[std::size_t(c)] > total[std::size_t(c)]) drop.push_back(int32_t(f));
+  }
+  if (drop.empty()) return;
+  editor.remove_faces(drop);
+  std::vector<char> used(current.vertices.size(), 0);
+  for (const auto& t : current.triangles)
+    for (int32_t v : t) used[std::size_t(v)] = 1;
+  cut.unused.clear();
+  for (std::size_t v = 0; v < used.size(); ++v)
+    if (!used[v]) cut.unused.push_back(int32_t(v));
+  cut.changed = true;
+}
+
+// ---- 5. embedding, then the solver ---------------------------------------------------------------------------------
+
+// Nothing is left to simulate: the object is gone. S's edits are kept and S is emptied; the simulator drops its model
+// (sim::Simulator::remove_object: an empty model, time still runs).
+void commit_removed(CutObject& object, sim::Simulator& simulator, SurfaceTransaction& surface) {
+  surface.commit();
+  object.surface = sim::TriMesh{};
+  object.grid = SurfaceGrid{};
+  object.cut_faces.clear();
+  simulator.remove_object();
+}
+
+// The solver part of stage 5: the simulator takes the new revision as the model thread prepared it (joined first),
+// or, should the preparation have failed, sets it and refreshes its solver here (a failed analysis is the next
+// step's to handle). Returns the stage's ms, the model thread's preparation included.
+double adopt_model(sim::Simulator& simulator, ModelStages& stages) {
+  ModelWork& work = stages.finished();
+  const auto t0 = Clock::now();
+  if (work.have_prepared) {
+    simulator.adopt(std::move(work.prepared));
+    return work.ms_prepare + ms_since(t0);
+  }
+  simulator.set_model(*work.next);
+  try {
+    simulator.refresh_solver();
+  } catch (const std::exception&) {
+  }
+  return ms_since(t0);
+}
+
+// How a cut ended when it did not throw.
+struct Verdict {
+  std::string status;  ///< "ok" | "no-op"
+  std::string reason;  ///< why a no-op
+};
+
+// The stages of apply_cut after its checks (see there), with their figures in `out`. Throws StageFailure (or
+// another exception) to skip the cut; the transaction then leaves everything as it was.
+Verdict run_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceEmbedding& embedding,
+                const CutRequest& request, const CutOptions& options, CutOutcome& out) {
+  const sim::ObjectModel& model = simulator.model();
+  auto t0 = Clock::now();
+  RestBlades rest = back_transform(model, simulator.state(), request, options, out);
+  out.ms.back_transform = ms_since(t0);
+  if (rest.blades.empty()) return {"no-op", "the blade meets no element"};
+
+  ModelStages stages(simulator, options, request.inscribed_radius, rest);
+  t0 = Clock::now();
+  SurfaceTransaction surface(object);
+  SurfaceCut cut = surface_stage(surface.editor(), object, model, rest, options, out);
+  out.ms.surface = ms_since(t0);
+
+  ModelWork& work = model_stages_done(stages, rest, cut.unrestricted, out);
+  if (work.dead_empty && !cut.changed) return {"no-op", "the blade removes no material"};
+  if (!work.fragment_leaves.empty()) {
+    t0 = Clock::now();
+    remove_fragment_surface(surface.editor(), *work.before_fragments, work.fragment_leaves, cut);
+    out.ms.node_split += ms_since(t0);
+  }
+
+  t0 = Clock::now();
+  if (work.all_gone) {
+    commit_removed(object, simulator, surface);
+    out.ms.embedding = ms_since(t0);
+    return {"ok", ""};
+  }
+  // S compacted once, in place; the embedding follows it (strong guarantee: when it throws, it is unchanged and the
+  // transaction restores S).
+  const sim::SurfaceEdit edit = surface.compact(cut.unused);
+  embedding.update(*work.next, object.surface, edit);
+  out.ms.embedding = ms_since(t0);
+  out.ms.solver_update = adopt_model(simulator, stages);
+  surface.commit();
+  object.surface_checked = object.surface_checked && options.verify;
+  return {"ok", ""};
 }
 
 }  // namespace
@@ -315,332 +835,13 @@ CutOutcome apply_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceE
     out.ms.total = ms_since(t_total);
     return out;
   };
-  if (object.removed) return finish("no-op", "the object has been cut away entirely");
-  if (!object.graph) return finish("skipped", "the object has no material graph");
+  if (simulator.empty()) return finish("no-op", "the object has been cut away entirely");
+  if (!simulator.model().material_graph()) return finish("skipped", "the object has no material graph");
   if (!(request.inscribed_radius > 0.0) || !std::isfinite(request.inscribed_radius))
     return finish("skipped", "the blade has no positive inscribed radius");
-
   try {
-    const sim::ObjectModel& model = simulator.model();
-    const sim::RootGeometry& root = model.root();
-
-    // ---- 1. back_transform -------------------------------------------------------------------------------------
-    auto t0 = Clock::now();
-    const BladeVolume blade(request.blade);
-    const sim::Box3 blade_box = blade.bounds();
-    std::vector<sim::Vec3> slots;
-    model.dofs().prolong(simulator.state().x, slots);
-    std::vector<int> touched;
-    for (int e = 0; e < model.num_elements(); ++e) {
-      std::array<sim::Vec3, 8> c;
-      sim::Box3 hb{sim::Vec3::Constant(INFINITY), sim::Vec3::Constant(-INFINITY)};
-      bool finite = true;
-      for (int k = 0; k < 8; ++k) {
-        c[std::size_t(k)] = slots[8 * std::size_t(e) + std::size_t(k)];
-        finite = finite && c[std::size_t(k)].allFinite();
-        hb.min = hb.min.cwiseMin(c[std::size_t(k)]);
-        hb.max = hb.max.cwiseMax(c[std::size_t(k)]);
-      }
-      if (!finite) throw StageFailure("back_transform: the deformed state is not finite");
-      if (boxes_overlap(hb, blade_box) && blade.overlaps_hexahedron(c)) touched.push_back(e);
-    }
-    if (touched.empty()) {
-      out.ms.back_transform = ms_since(t0);
-      return finish("no-op", "the blade meets no element");
-    }
-    // Components: touched leaves that share a face through which material connects.
-    UnionFind uf = material_groups(model, touched);
-    std::vector<std::vector<int>> groups;
-    {
-      std::vector<int> gid(touched.size(), -1);
-      for (std::size_t i = 0; i < touched.size(); ++i) {
-        const int r = uf.find(int(i));
-        if (gid[std::size_t(r)] < 0) {
-          gid[std::size_t(r)] = int(groups.size());
-          groups.emplace_back();
-        }
-        groups[std::size_t(gid[std::size_t(r)])].push_back(touched[i]);
-      }
-    }
-    out.components = int(groups.size());
-    std::vector<sim::TriMesh> rest_blades;
-    std::vector<std::vector<char>> foreign;  // per rest blade: the leaves it must not cut (see foreign_leaves)
-    for (const std::vector<int>& g : groups) {
-      std::vector<sim::Vec3> rest, deformed;
-      std::vector<double> weights;
-      for (int e : g) {
-        const double h = model.edge()[std::size_t(e)];
-        const double w = model.occupancy()[std::size_t(e)] * h * h * h / 8.0;
-        for (int k = 0; k < 8; ++k) {
-          rest.push_back(model.slot_rest()[8 * std::size_t(e) + std::size_t(k)]);
-          deformed.push_back(slots[8 * std::size_t(e) + std::size_t(k)]);
-          weights.push_back(w);
-        }
-      }
-      ShapeMatch match;
-      try {
-        match = shape_match(rest, deformed, weights, options.max_condition);
-      } catch (const std::invalid_argument& e) {
-        throw StageFailure(std::string("back_transform: shape matching failed: ") + e.what());
-      }
-      out.max_blend = std::max(out.max_blend, match.blend);
-      sim::TriMesh rest_blade = to_rest(match, request.blade);
-      // A back-transform that moves no vertex by more than rounding (an object at rest) is the identity: the
-      // blade is used as given, so that repeated cuts at rest meet earlier cut faces exactly, not 1e-19 m off.
-      double moved = 0.0;
-      for (std::size_t v = 0; v < rest_blade.vertices.size(); ++v)
-        moved = std::max(moved, (rest_blade.vertices[v] - request.blade.vertices[v]).cwiseAbs().maxCoeff());
-      if (moved <= 1e-12 * root.size) rest_blade = request.blade;
-      foreign.push_back(foreign_leaves(model, BladeVolume(rest_blade), g));
-      if (!foreign.back().empty()) ++out.restricted_components;
-      rest_blades.push_back(std::move(rest_blade));
-    }
-    out.ms.back_transform = ms_since(t0);
-
-    // Stages 3 and 4 and the new revision's solver preparation read only M, T, the state and the rest-space blades,
-    // never S: they run on a second thread (the model thread) while this one cuts S (stage 2). Once the new revision
-    // is known, that thread prepares its FEM system and symbolic analysis while this one updates the embedding.
-    // Nothing is committed before both are done, and the results do not depend on the interleaving.
-    const auto model_stages = [&](ModelWork& w, const std::vector<sim::TriMesh>& blades, std::promise<void>* ready,
-                                  const std::function<bool()>& cancelled) {
-      bool signalled = false;
-      const auto signal = [&] {
-        if (signalled) return;
-        signalled = true;
-        if (ready) ready->set_value();
-      };
-      try {
-        run_model_stages(w, blades, foreign, object.graph, model, simulator, options, request.inscribed_radius, signal,
-                         cancelled);
-      } catch (const std::exception& e) {
-        std::string why =
-            dynamic_cast<const StageFailure*>(&e) ? e.what() : std::string("unexpected error: ") + e.what();
-        (signalled ? w.prepare_error : w.error) = std::move(why);
-      }
-      signal();
-    };
-    ModelWork work;
-    std::promise<void> model_ready;
-    std::future<void> model_known = model_ready.get_future();
-    // Its destructor asks it to skip the preparation and joins it, on every way out of this function. Without a
-    // thread to be had, the model stages run here first.
-    std::jthread model_thread;
-    try {
-      model_thread = std::jthread([&, blades = rest_blades](std::stop_token stop) {
-        model_stages(work, blades, &model_ready, [stop] { return stop.stop_requested(); });
-      });
-    } catch (const std::system_error&) {
-      model_stages(work, rest_blades, &model_ready, [] { return false; });
-    }
-
-    // ---- 2. surface ------------------------------------------------------------------------------------------------
-    t0 = Clock::now();
-    // S is edited in place (its grid finds the faces near each blade); the journal undoes every edit when a later
-    // stage fails. Vertices that no triangle uses any more stay in S until stage 5 compacts it.
-    if (!surface_indexed(object)) {  // O(|S|): only when the caller did not index S
-      try {
-        index_surface(object);
-      } catch (const std::invalid_argument& e) {
-        throw StageFailure(std::string("surface: ") + e.what());
-      }
-    }
-    SurfaceEditor editor(object.surface, *object.grid.grid, &object.cut_faces);
-    struct Rollback {  // on every way out without a commit
-      SurfaceEditor& editor;
-      bool armed = true;
-      ~Rollback() {
-        if (armed) editor.rollback(0);
-      }
-    } rollback{editor};
-    const std::size_t vertices_before = object.surface.vertices.size();  // S.vertices[0, vertices_before) are old
-    std::vector<int32_t> unused;  // vertices of S that no triangle uses any more, ascending
-    bool surface_changed = false;
-    SurfaceCutOptions sopt;
-    sopt.verify = options.verify;
-    sopt.check_blade_self_intersection = false;  // blades are checked when loaded (or built convex)
-    // S checked once, and changed since only by verified cuts (which check every changed face against its
-    // neighbours), stays free of self-intersections: CGAL need not check it again.
-    sopt.check_surface_self_intersection = !object.surface_checked;
-    std::vector<char> unrestricted(rest_blades.size(), 0);  // per blade: its restriction was dropped
-    for (std::size_t k = 0; k < rest_blades.size(); ++k) {
-      sim::TriMesh& b = rest_blades[k];
-      if (object.surface.triangles.empty()) break;
-      sopt.removable = nullptr;
-      if (!foreign[k].empty())
-        sopt.removable = [&model, &f = foreign[k]](const sim::Vec3& p) { return !in_foreign(model, f, p); };
-      // A degenerate configuration that the boolean refuses is retried with the blade moved by 1e-9, then 1e-7,
-      // of its size; the blade that was used is the one the model stages must use too. A failed attempt leaves S
-      // as it was.
-      auto [r, moves] = cut_surface_in_place_perturbing(editor, b, sopt);
-      // The restriction decides per region of S and of the blade, by one point each, and leaves are coarser than
-      // S: where a region straddles the border of the foreign material, the kept pieces need not close up and the
-      // boolean refuses its result. B'_i then cuts without the restriction (as if nothing were foreign), and the
-      // model stages run again without it too.
-      if (r.status == SurfaceCutStatus::failed && sopt.removable) {
-        sopt.removable = nullptr;
-        sim::TriMesh unrestricted_blade = b;
-        auto [again, again_moves] = cut_surface_in_place_perturbing(editor, unrestricted_blade, sopt);
-        if (again.status != SurfaceCutStatus::failed) {
-          b = std::move(unrestricted_blade);
-          r = std::move(again);
-          moves = again_moves;
-          unrestricted[k] = 1;
-          ++out.unrestricted;
-          --out.restricted_components;
-        }
-      }
-      if (moves > 0) ++out.perturbed;
-      if (r.status == SurfaceCutStatus::failed) throw StageFailure("surface: " + r.reason);
-      if (r.status == SurfaceCutStatus::no_op) continue;
-      out.removed_volume += r.removed_volume;
-      std::vector<int32_t> merged;
-      merged.reserve(unused.size() + r.removed_vertices.size());
-      std::merge(unused.begin(), unused.end(), r.removed_vertices.begin(), r.removed_vertices.end(),
-                 std::back_inserter(merged));
-      unused = std::move(merged);
-      surface_changed = true;
-    }
-    out.ms.surface = ms_since(t0);
-
-    model_known.wait();
-    // A perturbed blade removes material where it now is, and one whose restriction was dropped removes all the
-    // material under it: the model stages run again, here, with the blades and restrictions used.
-    if (out.perturbed > 0 || out.unrestricted > 0) {
-      model_thread.request_stop();
-      if (model_thread.joinable()) model_thread.join();
-      for (std::size_t k = 0; k < unrestricted.size(); ++k) {
-        if (unrestricted[k]) foreign[k].clear();
-      }
-      work = ModelWork{};
-      model_stages(work, rest_blades, nullptr, [] { return false; });
-    }
-    if (!work.error.empty()) throw StageFailure(work.error);
-    out.tets_removed = work.tets_removed;
-    out.leaves_refined = work.leaves_refined;
-    out.fragments_removed = work.fragments_removed;
-    out.fragment_volume = work.fragment_volume;
-    out.ms.material_graph = work.ms_material_graph;
-    out.ms.refine = work.ms_refine;
-    out.ms.node_split = work.ms_node_split;
-    if (work.dead_empty && !surface_changed) return finish("no-op", "the blade removes no material");
-
-    // The surface parts that lie in the removed pieces go with them: a component of S whose vertices mostly lie in
-    // removed leaves.
-    bool all_gone = work.all_gone;
-    if (!work.fragment_leaves.empty()) {
-      t0 = Clock::now();
-      const sim::ObjectModel& split = *work.before_fragments;  // the model whose leaves fragment_leaves lists
-      std::vector<char> gone_leaf(std::size_t(split.num_elements()), 0);
-      for (int e : work.fragment_leaves) gone_leaf[std::size_t(e)] = 1;
-      int ncomp = 0;
-      const sim::TriMesh& current = object.surface;
-      const std::vector<int> tcomp = triangle_components(current, ncomp);
-      std::vector<int> in_gone(std::size_t(ncomp), 0), total(std::size_t(ncomp), 0);
-      std::vector<char> seen(current.vertices.size(), 0);
-      for (std::size_t f = 0; f < current.triangles.size(); ++f) {
-        for (int32_t v : current.triangles[f]) {
-          if (seen[std::size_t(v)]) continue;
-          seen[std::size_t(v)] = 1;
-          ++total[std::size_t(tcomp[f])];
-          const auto pe = split.embed(current.vertices[std::size_t(v)]);
-          if (pe && gone_leaf[std::size_t(pe->leaf)]) ++in_gone[std::size_t(tcomp[f])];
-        }
-      }
-      std::vector<int32_t> drop;  // triangles of the removed components, ascending
-      for (std::size_t f = 0; f < current.triangles.size(); ++f) {
-        const int c = tcomp[f];
-        if (2 * in_gone[std::size_t(c)] > total[std::size_t(c)]) drop.push_back(int32_t(f));
-      }
-      if (!drop.empty()) {
-        editor.remove_faces(drop);
-        // The vertices that no triangle uses any more join `unused`.
-        std::vector<char> used(current.vertices.size(), 0);
-        for (const auto& t : current.triangles)
-          for (int32_t v : t) used[std::size_t(v)] = 1;
-        unused.clear();
-        for (std::size_t v = 0; v < used.size(); ++v)
-          if (!used[v]) unused.push_back(int32_t(v));
-        surface_changed = true;
-      }
-      out.ms.node_split += ms_since(t0);
-    }
-
-    // ---- 5. embedding, then the solver -----------------------------------------------------------------------------
-    t0 = Clock::now();
-    if (all_gone) {
-      // Nothing is left to simulate: the object is gone. The simulator keeps its last model but is no longer run.
-      editor.commit();
-      rollback.armed = false;
-      object.surface = sim::TriMesh{};
-      object.grid = SurfaceGrid{};
-      object.cut_faces.clear();
-      object.graph = work.graph;
-      object.removed = true;
-      out.ms.embedding = ms_since(t0);
-      return finish("ok", "");
-    }
-    // S compacted: the vertices no triangle uses go, the others keep their order (the embedding's edit: old ones
-    // removed, new ones appended). The edit gets its own triangles; S itself is compacted in place at the commit.
-    sim::SurfaceEdit edit;
-    const auto n = int32_t(object.surface.vertices.size());
-    std::vector<int32_t> old_to_new(static_cast<std::size_t>(n));  // (|V|): the new index of each vertex, -1 for an unused one
-    {
-      const sim::TriMesh& current = object.surface;
-      int32_t from = 0, shift = 0;
-      for (const int32_t v : unused) {
-        std::iota(old_to_new.begin() + from, old_to_new.begin() + v, from - shift);
-        old_to_new[std::size_t(v)] = -1;
-        if (std::size_t(v) < vertices_before) edit.removed_vertices.push_back(int(v));
-        from = v + 1;
-        ++shift;
-      }
-      std::iota(old_to_new.begin() + from, old_to_new.end(), from - shift);
-      for (std::size_t v = vertices_before; v < current.vertices.size(); ++v)
-        if (old_to_new[v] >= 0) edit.inserted_rest.push_back(current.vertices[v]);
-      edit.triangles = current.triangles;
-      if (!unused.empty()) {
-        const int32_t first_unused = unused.front();  // below it, indices stay
-        for (auto& t : edit.triangles)
-          for (int32_t& v : t)
-            if (v > first_unused) v = old_to_new[std::size_t(v)];
-      }
-    }
-    embedding.update(*work.next, std::move(edit));  // strong guarantee: unchanged when it throws
-    out.ms.embedding = ms_since(t0);
-
-    if (model_thread.joinable()) model_thread.join();
-    t0 = Clock::now();
-    if (work.have_prepared) {
-      simulator.adopt(std::move(work.prepared));
-      out.ms.solver_update = work.ms_prepare + ms_since(t0);
-    } else {
-      // The preparation failed on the model thread (it only allocates and analyses, so it should not): as
-      // set_model and refresh_solver, whose failed analysis the next step handles.
-      simulator.set_model(*work.next);
-      try {
-        simulator.refresh_solver();
-      } catch (const std::exception&) {
-      }
-      out.ms.solver_update = ms_since(t0);
-    }
-
-    // Commit the object. The grid's triangles keep their indices and their vertices their positions.
-    editor.commit();
-    rollback.armed = false;
-    if (!unused.empty()) {
-      // In place: the used vertices move down over the unused ones (no allocation; room stays for the next cut).
-      std::vector<sim::Vec3>& vs = object.surface.vertices;
-      for (int32_t v = unused.front() + 1; v < n; ++v)
-        if (old_to_new[std::size_t(v)] >= 0) vs[std::size_t(old_to_new[std::size_t(v)])] = vs[std::size_t(v)];
-      vs.resize(vs.size() - unused.size());
-      // The embedding holds the remapped triangles (the edit's, taken over): copied into S's own storage.
-      object.surface.triangles.assign(embedding.triangles().begin(), embedding.triangles().end());
-    }
-    object.grid.vertices = object.surface.vertices.size();
-    object.grid.triangles = object.surface.triangles.size();
-    object.graph = std::move(work.graph);
-    object.surface_checked = object.surface_checked && options.verify;
-    return finish("ok", "");
+    Verdict v = run_cut(object, simulator, embedding, request, options, out);
+    return finish(std::move(v.status), std::move(v.reason));
   } catch (const StageFailure& e) {
     return finish("skipped", e.what());
   } catch (const std::exception& e) {

@@ -43,7 +43,7 @@ struct Object {
 Object make_object(const Box3& box, const sim::RootGeometry& root, int base, int max_level,
                    std::vector<sim::HandleSpec> handles, double cell = 0.001) {
   Object o;
-  o.cut.graph = std::make_shared<sim::MaterialGraph>(sim::box_tet_mesh(box, cell));
+  auto graph = std::make_shared<sim::MaterialGraph>(sim::box_tet_mesh(box, cell));
   o.cut.surface = sim::closed_box_grid(box, 16);
   o.cut.cut_faces.assign(o.cut.surface.triangles.size(), 0);
   sim::OctreeSpec spec;
@@ -54,14 +54,34 @@ Object make_object(const Box3& box, const sim::RootGeometry& root, int base, int
   p.young_modulus = 1e5;
   p.poisson_ratio = 0.3;
   p.density = 1000.0;
-  sim::ObjectModel model = sim::ObjectModel::build(spec, o.cut.graph, p, std::move(handles));
+  sim::ObjectModel model = sim::ObjectModel::build(spec, std::move(graph), p, std::move(handles));
   sim::SimulatorOptions so;
   so.dt = 1e-3;
   so.gravity = Vec3::Zero();
   so.threads = 1;
   o.sim = std::make_unique<sim::Simulator>(std::move(model), so);
-  o.emb = std::make_unique<sim::SurfaceEmbedding>(o.sim->model(), o.cut.surface.vertices, o.cut.surface.triangles);
+  o.emb = std::make_unique<sim::SurfaceEmbedding>(o.sim->model(), o.cut.surface);
   return o;
+}
+
+// The embedding follows S, the CutObject's one copy: given S, it matches its sizes and equals a fresh embedding of S
+// in the current model bit for bit, deformed positions and normals included.
+void expect_embeds_surface(const Object& o) {
+  ASSERT_TRUE(o.emb->matches(o.cut.surface));
+  const sim::SurfaceEmbedding fresh(o.sim->model(), o.cut.surface);
+  EXPECT_EQ(o.emb->zcurve().entries(), fresh.zcurve().entries());
+  EXPECT_EQ(o.emb->embeddings(), fresh.embeddings());
+  EXPECT_EQ(o.emb->dof_begin(), fresh.dof_begin());
+  EXPECT_EQ(o.emb->dof_index(), fresh.dof_index());
+  EXPECT_EQ(o.emb->dof_weight(), fresh.dof_weight());
+  sim::Executor exec(1);
+  std::vector<Vec3> pa, pb, na, nb;
+  o.emb->deformed_positions(o.sim->state().x, pa, exec);
+  fresh.deformed_positions(o.sim->state().x, pb, exec);
+  EXPECT_EQ(pa, pb);
+  o.emb->deformed_normals(o.cut.surface, pa, na, exec);
+  fresh.deformed_normals(o.cut.surface, pb, nb, exec);
+  EXPECT_EQ(na, nb);
 }
 
 cutting::CutOutcome cut(Object& o, const sim::TriMesh& blade, double r, cutting::CutOptions opt = {}) {
@@ -115,6 +135,26 @@ TEST(CutPipeline, PunchThroughASlabAtRest) {
   EXPECT_EQ(o.sim->stats().failed_steps, 0);
 }
 
+// The grid over S lists exactly the triangles that a brute-force box test finds, for random boxes over the slab.
+void expect_grid_lists_s(cutting::CutObject& object) {
+  const sim::TriMesh& s = object.surface;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-0.005, 0.045), w(0.0, 0.01);
+  for (int q = 0; q < 300; ++q) {
+    const Vec3 lo(u(rng), u(rng), u(rng) * 0.2), hi = lo + Vec3(w(rng), w(rng), w(rng));
+    std::vector<int32_t> truth;
+    for (std::size_t f = 0; f < s.triangles.size(); ++f) {
+      Vec3 a = s.vertices[std::size_t(s.triangles[f][0])], b = a;
+      for (const int32_t v : s.triangles[f]) {
+        a = a.cwiseMin(s.vertices[std::size_t(v)]);
+        b = b.cwiseMax(s.vertices[std::size_t(v)]);
+      }
+      if ((a.array() <= hi.array()).all() && (b.array() >= lo.array()).all()) truth.push_back(int32_t(f));
+    }
+    ASSERT_EQ(object.grid.grid->query(s, lo, hi), truth) << "box " << q;
+  }
+}
+
 TEST(CutPipeline, SurfaceGridFollowsSThroughCutsAndCopies) {
   // S is edited in place through its grid: after three punches (one of them through earlier cut walls) the grid
   // lists exactly the triangles a brute-force box test finds, S has no unused vertex, and the embedding holds S. A
@@ -130,30 +170,15 @@ TEST(CutPipeline, SurfaceGridFollowsSThroughCutsAndCopies) {
   }
   const sim::TriMesh& s = o.cut.surface;
   expect_watertight(s, "surface");  // includes: no unused vertex
-  EXPECT_EQ(o.emb->rest_vertices(), s.vertices);
-  EXPECT_EQ(o.emb->triangles(), s.triangles);
+  expect_embeds_surface(o);
   EXPECT_EQ(o.cut.cut_faces.size(), s.triangles.size());
-  std::mt19937 rng(5);
-  std::uniform_real_distribution<double> u(-0.005, 0.045), w(0.0, 0.01);
-  for (int q = 0; q < 300; ++q) {
-    const Vec3 lo(u(rng), u(rng), u(rng) * 0.2), hi = lo + Vec3(w(rng), w(rng), w(rng));
-    std::vector<int32_t> truth;
-    for (std::size_t f = 0; f < s.triangles.size(); ++f) {
-      Vec3 a = s.vertices[std::size_t(s.triangles[f][0])], b = a;
-      for (const int32_t v : s.triangles[f]) {
-        a = a.cwiseMin(s.vertices[std::size_t(v)]);
-        b = b.cwiseMax(s.vertices[std::size_t(v)]);
-      }
-      if ((a.array() <= hi.array()).all() && (b.array() >= lo.array()).all()) truth.push_back(int32_t(f));
-    }
-    ASSERT_EQ(o.cut.grid.grid->query(s, lo, hi), truth) << "box " << q;
-  }
+  expect_grid_lists_s(o.cut);
 
   const sim::TriMesh before = o.cut.surface;
   cutting::CutObject copied = o.cut;
   EXPECT_FALSE(cutting::surface_indexed(copied));
   sim::Simulator sim2(o.sim->model(), o.sim->options());
-  sim::SurfaceEmbedding emb2(sim2.model(), copied.surface.vertices, copied.surface.triangles);
+  sim::SurfaceEmbedding emb2(sim2.model(), copied.surface);
   const auto out = cutting::apply_cut(copied, sim2, emb2, {prism(Vec3(0.015, 0.03, 0.002), r, 0.01, 24), r * 0.9}, {});
   ASSERT_EQ(out.status, "ok") << out.reason;
   EXPECT_TRUE(cutting::surface_indexed(copied));
@@ -200,8 +225,14 @@ TEST(CutPipeline, BladeThatRemovesTheWholeObject) {
   Object o = make_object(kSlab, kSlabRoot, 4, 7, {left_handle()});
   const auto out = cut(o, box_mesh({Vec3(-0.01, -0.01, -0.01), Vec3(0.05, 0.05, 0.02)}), 0.015);
   ASSERT_EQ(out.status, "ok") << out.reason;
-  EXPECT_TRUE(o.cut.removed);
+  // Nothing left to simulate: the simulator holds an empty model, and stepping only advances time.
+  EXPECT_TRUE(o.sim->empty());
+  EXPECT_EQ(o.sim->model().num_elements(), 0);
+  EXPECT_EQ(o.sim->model().num_dofs(), 0);
   EXPECT_TRUE(o.cut.surface.triangles.empty());
+  const double t = o.sim->state().t;
+  o.sim->step();
+  EXPECT_DOUBLE_EQ(o.sim->state().t, t + o.sim->options().dt);
   // Further cuts are no-ops.
   EXPECT_EQ(cut(o, prism(Vec3(0.02, 0.02, 0.002), 0.002, 0.01, 16), 0.0015).status, "no-op");
 }
@@ -277,9 +308,8 @@ TEST(CutPipeline, FoldedSlabPunchedOnceShowsTwoHolesInRestSpace) {
   ASSERT_EQ(out.status, "ok") << out.reason;
   EXPECT_EQ(out.components, 2);
   EXPECT_EQ(out.restricted_components, 0);  // each B'_i lies in its own half's rest place
-  // Two booleans in turn, one embedding update: the embedding holds exactly the committed surface.
-  EXPECT_EQ(o.emb->rest_vertices(), o.cut.surface.vertices);
-  EXPECT_EQ(o.emb->triangles(), o.cut.surface.triangles);
+  // Two booleans in turn, one embedding update: the embedding follows exactly the committed surface.
+  expect_embeds_surface(o);
   const double expect = 2.0 * prism_area(r, 32) * 0.004;
   EXPECT_NEAR(out.removed_volume, expect, 1e-9 * expect);
   expect_watertight(o.cut.surface, "surface");
@@ -313,6 +343,39 @@ TEST(CutPipeline, FailedStageLeavesEverythingAsItWas) {
   EXPECT_EQ(o.sim->model().num_dofs(), d0);
   EXPECT_EQ(o.sim->state().x, x0);
   EXPECT_EQ(o.emb->num_vertices(), int(s0.vertices.size()));
+}
+
+TEST(CutPipeline, FailedEmbeddingUpdateRestoresTheCompactedSurface) {
+  // The embedding stage fails after S was compacted (here the embedding given is one of another surface, so its
+  // update rejects S): the cut is skipped, and S, its grid and its cut faces are as they were. The same cut with the
+  // right embedding then goes through, and it removes the top face's centre vertex: the failed cut had compacted S.
+  Object o = make_object(kSlab, kSlabRoot, 4, 7, {left_handle()});
+  cutting::index_surface(o.cut);
+  const sim::TriMesh s0 = o.cut.surface;
+  const std::vector<char> faces0 = o.cut.cut_faces;
+  const int rev0 = o.sim->model().revision();
+  const Vec3 centre(0.02, 0.02, 0.004);
+  ASSERT_EQ(std::count(s0.vertices.begin(), s0.vertices.end(), centre), 1);
+  const sim::TriMesh blade = prism(Vec3(0.02, 0.02, 0.002), 0.004, 0.01, 32);
+  sim::SurfaceEmbedding other(o.sim->model(), sim::closed_box_grid(kSlab, 32));
+  ASSERT_GT(other.num_vertices(), int(s0.vertices.size()));
+  const auto failed = cutting::apply_cut(o.cut, *o.sim, other, {blade, 0.0039}, {});
+  EXPECT_EQ(failed.status, "skipped");
+  EXPECT_NE(failed.reason.find("SurfaceEmbedding::update"), std::string::npos) << failed.reason;
+  EXPECT_EQ(o.cut.surface.vertices, s0.vertices);
+  EXPECT_EQ(o.cut.surface.triangles, s0.triangles);
+  EXPECT_EQ(o.cut.cut_faces, faces0);
+  ASSERT_TRUE(cutting::surface_indexed(o.cut));
+  expect_grid_lists_s(o.cut);
+  EXPECT_EQ(o.sim->model().revision(), rev0);
+  expect_embeds_surface(o);
+
+  const auto ok = cut(o, blade, 0.0039);
+  ASSERT_EQ(ok.status, "ok") << ok.reason;
+  EXPECT_EQ(std::count(o.cut.surface.vertices.begin(), o.cut.surface.vertices.end(), centre), 0);
+  expect_watertight(o.cut.surface, "surface");
+  expect_grid_lists_s(o.cut);
+  expect_embeds_surface(o);
 }
 
 // A 12 mm-wide wall through the slab's whole width and thickness cuts it in two.
@@ -351,9 +414,9 @@ TEST(CutPipeline, LooseHalfIsRemovedAsAFragment) {
       EXPECT_NEAR(out.fragment_volume, 0.017 * 0.04 * 0.004, 0.0015 * 0.04 * 0.004);
       expect_watertight(o.cut.surface, "surface");
       for (const Vec3& x : o.cut.surface.vertices) EXPECT_LT(x.x(), 0.0175);
-      // The boolean and then the fragment's surface removal, one embedding update: it holds the committed surface.
-      EXPECT_EQ(o.emb->rest_vertices(), o.cut.surface.vertices);
-      EXPECT_EQ(o.emb->triangles(), o.cut.surface.triangles);
+      // The boolean and then the fragment's surface removal, one embedding update: it follows the committed
+      // surface.
+      expect_embeds_surface(o);
     } else {
       EXPECT_EQ(out.fragments_removed, 0);
       EXPECT_EQ(count, 2);
@@ -376,7 +439,7 @@ void two_slabs(Object& o, const sim::TriMesh& surface) {
       tets.tets.push_back(t);
     }
   }
-  o.cut.graph = std::make_shared<sim::MaterialGraph>(std::move(tets));
+  auto graph = std::make_shared<sim::MaterialGraph>(std::move(tets));
   o.cut.surface = surface;
   o.cut.cut_faces.assign(o.cut.surface.triangles.size(), 0);
   o.cut.surface_checked = true;
@@ -393,8 +456,8 @@ void two_slabs(Object& o, const sim::TriMesh& surface) {
   so.gravity = Vec3::Zero();
   so.threads = 1;
   o.sim = std::make_unique<sim::Simulator>(
-      sim::ObjectModel::build(spec, o.cut.graph, mp, {{{Vec3(-1, -1, -1), Vec3(0.004, 1, 1)}, {}}}), so);
-  o.emb = std::make_unique<sim::SurfaceEmbedding>(o.sim->model(), o.cut.surface.vertices, o.cut.surface.triangles);
+      sim::ObjectModel::build(spec, std::move(graph), mp, {{{Vec3(-1, -1, -1), Vec3(0.004, 1, 1)}, {}}}), so);
+  o.emb = std::make_unique<sim::SurfaceEmbedding>(o.sim->model(), o.cut.surface);
   int count = 0;
   sim::element_components(o.sim->model(), count);
   ASSERT_EQ(count, 2);
@@ -426,10 +489,10 @@ TEST(CutPipeline, BladeCutsOnlyTheMaterialOfItsOwnComponent) {
   Object o;
   two_slabs(o, test::merged(sim::closed_box_grid(lower, 32), sim::closed_box_grid(upper, 32)));
   const sim::TriMesh s0 = o.cut.surface;
-  const auto upper_tets = [&] {  // alive tets of the upper slab
+  const auto upper_tets = [&] {  // alive tets of the upper slab, in M as the model holds it
+    const sim::MaterialGraph& graph = *o.sim->model().material_graph();
     int count = 0;
-    for (int t = 0; t < o.cut.graph->num_tets_total(); ++t)
-      count += o.cut.graph->alive(t) && o.cut.graph->tet(t)[0].z() > 0.0045;
+    for (int t = 0; t < graph.num_tets_total(); ++t) count += graph.alive(t) && graph.tet(t)[0].z() > 0.0045;
     return count;
   };
   const int upper_tets0 = upper_tets();

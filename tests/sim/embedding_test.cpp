@@ -10,6 +10,7 @@
 #include <numbers>
 #include <random>
 #include <set>
+#include <type_traits>
 
 #include "octocut/sim/embedding.hpp"
 #include "octocut/sim/naive_embedding.hpp"
@@ -70,14 +71,26 @@ std::vector<Vec3> affine_dofs(const ObjectModel& m) {
 void expect_same(const SurfaceEmbedding& a, const SurfaceEmbedding& b) {
   EXPECT_EQ(a.zcurve().entries(), b.zcurve().entries());
   ASSERT_EQ(a.num_vertices(), b.num_vertices());
-  for (int v = 0; v < a.num_vertices(); ++v) {
-    EXPECT_EQ(a.rest_vertices()[std::size_t(v)], b.rest_vertices()[std::size_t(v)]);
+  EXPECT_EQ(a.num_triangles(), b.num_triangles());
+  for (int v = 0; v < a.num_vertices(); ++v)
     EXPECT_EQ(a.embeddings()[std::size_t(v)], b.embeddings()[std::size_t(v)]) << "vertex " << v;
-  }
   EXPECT_EQ(a.dof_begin(), b.dof_begin());
   EXPECT_EQ(a.dof_index(), b.dof_index());
   EXPECT_EQ(a.dof_weight(), b.dof_weight());
-  EXPECT_EQ(a.triangles(), b.triangles());
+}
+
+// S after a cut-like edit of `s`: the vertices not in `removed` in their order, then `inserted`, and `triangles`
+// (in the new indices).
+TriMesh edited(const TriMesh& s, const std::vector<int>& removed, const std::vector<Vec3>& inserted,
+               std::vector<std::array<int32_t, 3>> triangles) {
+  std::vector<char> gone(s.vertices.size(), 0);
+  for (const int v : removed) gone[std::size_t(v)] = 1;
+  TriMesh out;
+  for (std::size_t v = 0; v < s.vertices.size(); ++v)
+    if (!gone[v]) out.vertices.push_back(s.vertices[v]);
+  out.vertices.insert(out.vertices.end(), inserted.begin(), inserted.end());
+  out.triangles = std::move(triangles);
+  return out;
 }
 
 TEST(ZCurve, CodesOrderAndRangeQueriesMatchBruteForce) {
@@ -123,7 +136,7 @@ TEST(ZCurve, CodesOrderAndRangeQueriesMatchBruteForce) {
 TEST(SurfaceEmbedding, LeafRangesPartitionTheVerticesLikeTheNaiveOctree) {
   const ObjectModel m = hanging_model();
   const TriMesh s = ellipsoid(kCentre, kRadii, 48, 24);
-  const SurfaceEmbedding e(m, s.vertices, s.triangles);
+  const SurfaceEmbedding e(m, s);
   const NaiveEmbedding naive(m.tree(), m.root(), s.vertices);
   EXPECT_EQ(naive.num_entries() > s.vertices.size(), true);
   std::size_t total = 0;
@@ -148,7 +161,7 @@ TEST(SurfaceEmbedding, ReproducesRestAndAffineFieldsWithHangingNodes) {
   const ObjectModel m = hanging_model();
   ASSERT_GT(m.dofs().hanging_slots, 0);
   const TriMesh s = ellipsoid(kCentre, kRadii, 48, 24);
-  const SurfaceEmbedding e(m, s.vertices, s.triangles);
+  const SurfaceEmbedding e(m, s);
   Executor exec(1);
   std::vector<Vec3> p;
   // At rest the vertices come back where they are.
@@ -170,11 +183,11 @@ TEST(SurfaceEmbedding, NormalsOfAnAffinelyDeformedClosedMeshAreAnalytic) {
   const ObjectModel m = hanging_model();
   const TriMesh s = ellipsoid(kCentre, kRadii, 48, 24);
   ASSERT_GT(signed_volume(s), 0.0);
-  const SurfaceEmbedding e(m, s.vertices, s.triangles);
+  const SurfaceEmbedding e(m, s);
   Executor exec(1);
   std::vector<Vec3> p, n;
   e.deformed_positions(affine_dofs(m), p, exec);
-  e.deformed_normals(p, n, exec);
+  e.deformed_normals(s, p, n, exec);
   // Area-weighted face normals transform with the cofactor det(A) A^-T, so the vertex normals are A^-T n_rest.
   const std::vector<Vec3> rest_n = vertex_normals(s.vertices, s.triangles);
   const Mat3 cof = kA.inverse().transpose();
@@ -186,13 +199,39 @@ TEST(SurfaceEmbedding, NormalsOfAnAffinelyDeformedClosedMeshAreAnalytic) {
   EXPECT_EQ(n, vertex_normals(p, s.triangles));
 }
 
+// S has one owner: the embedding offers no copy of it, cannot be built from loose arrays, and reads S's triangles
+// from the surface it is given (the normals of S with every triangle turned over point the other way).
+template <class E>
+concept OffersRestVertices = requires(const E& e) { e.rest_vertices(); };
+template <class E>
+concept OffersTriangles = requires(const E& e) { e.triangles(); };
+static_assert(!OffersRestVertices<SurfaceEmbedding> && !OffersTriangles<SurfaceEmbedding>);
+static_assert(!std::is_constructible_v<SurfaceEmbedding, const ObjectModel&, std::vector<Vec3>,
+                                       std::vector<std::array<int32_t, 3>>>);
+
+TEST(SurfaceEmbedding, ReadsTheTrianglesOfTheSurfaceItIsGiven) {
+  const ObjectModel m = hanging_model();
+  const TriMesh s = ellipsoid(kCentre, kRadii, 48, 24);
+  const SurfaceEmbedding e(m, s);
+  EXPECT_TRUE(e.matches(s));
+  TriMesh flipped = s;
+  for (auto& t : flipped.triangles) std::swap(t[1], t[2]);
+  Executor exec(1);
+  std::vector<Vec3> p, n, n_flipped;
+  e.deformed_positions(affine_dofs(m), p, exec);
+  e.deformed_normals(s, p, n, exec);
+  e.deformed_normals(flipped, p, n_flipped, exec);
+  for (std::size_t v = 0; v < n.size(); ++v) EXPECT_EQ(n_flipped[v], Vec3(-n[v])) << v;
+}
+
 TEST(SurfaceEmbedding, FallbackVerticesBindToTheNearestLeafWithClampedWeights) {
   // Leaves exactly cover [2, 14] mm; the triangle's vertices lie outside all of them.
   const ObjectModel m = test::box_model({Vec3::Constant(0.002), Vec3::Constant(0.014)}, kRoot.min, kRoot.size, 3);
   const std::vector<Vec3> rest{Vec3(0.0145, 0.008, 0.0091),  // 0.5 mm beyond a face, on a leaf boundary in y
                                Vec3(0.0159, 0.0158, 0.0157),  // far beyond a corner: the weights must be clamped
                                Vec3(0.010, 0.009, 0.011)};    // inside
-  const SurfaceEmbedding e(m, rest, {{0, 1, 2}});
+  const TriMesh s{rest, {{0, 1, 2}}};
+  const SurfaceEmbedding e(m, s);
   EXPECT_EQ(e.num_fallback(), 2);
   for (int v = 0; v < 2; ++v) {
     const VertexEmbedding& ve = e.embeddings()[std::size_t(v)];
@@ -245,7 +284,7 @@ TEST(SurfaceEmbedding, FallbackSearchMatchesTheBruteForceScan) {
   std::vector<Vec3> pts;
   for (int i = 0; i < 1500; ++i) pts.push_back(Vec3(u(rng), u(rng), u(rng)));
   for (int i = 0; i < 500; ++i) pts.push_back(0.0005 * Vec3(lattice(rng), lattice(rng), lattice(rng)));
-  const SurfaceEmbedding e(m, pts, {});
+  const SurfaceEmbedding e(m, TriMesh{pts, {}});
   EXPECT_GT(e.num_fallback(), 1000);
   for (std::size_t v = 0; v < pts.size(); ++v)
     EXPECT_EQ(e.embeddings()[v], embed_vertex(m.tree(), m.root(), pts[v])) << "point " << v;
@@ -346,7 +385,7 @@ TEST(SurfaceEmbedding, FallbackVerticesStayInTheMaterialComponentOfTheirSurface)
   TriMesh s = left;
   append(s, right);
   const int n_left = int(left.vertices.size());
-  const SurfaceEmbedding e(m, s.vertices, s.triangles);
+  const SurfaceEmbedding e(m, s);
 
   // The left box's face in the gap: nearer to the right block, yet bound to the nearest leaf of the left block.
   int gap_face = 0, right_fallback = 0;
@@ -401,7 +440,7 @@ TEST(SurfaceEmbedding, SurfacePartsWithoutRegularVerticesUseThePlainNearestLeaf)
   TriMesh s = box_surface(kLeftLo, kLeftHi, kBoxQuads);
   const int n_left = int(s.vertices.size());
   append(s, box_surface(Vec3(0.00755, 0.0076, 0.0142), Vec3(0.00795, 0.0084, 0.0146), 2));
-  const SurfaceEmbedding e(m, s.vertices, s.triangles);
+  const SurfaceEmbedding e(m, s);
   int floating = 0;
   for (int v = n_left; v < e.num_vertices(); ++v) {
     const Vec3& p = s.vertices[std::size_t(v)];
@@ -431,7 +470,7 @@ TEST(SurfaceEmbedding, FallbackAnchorIsTheNearestRegularVertexByEdgesThenByIndex
     std::vector<Vec3> rest{a_first ? a : b, a_first ? b : a};
     for (const double x : {0.0072, 0.0075, 0.0078}) rest.push_back(Vec3(x, 0.008, 0.008));      // f1, f2, f3
     for (const double x : {0.0071, 0.00735, 0.00765, 0.0079}) rest.push_back(Vec3(x, 0.008, 0.009));  // closers
-    const SurfaceEmbedding e(m, rest, {{ia, 2, 5}, {2, 3, 6}, {3, 4, 7}, {4, ib, 8}});
+    const SurfaceEmbedding e(m, TriMesh{rest, {{ia, 2, 5}, {2, 3, 6}, {3, 4, 7}, {4, ib, 8}}});
     EXPECT_EQ(e.num_fallback(), 7);
     const auto& emb = e.embeddings();
     EXPECT_TRUE(in_left_block(m, emb[std::size_t(ia)].leaf));
@@ -457,11 +496,12 @@ void check_component_update_equals_rebuild(int count, bool refine, bool expect_m
   TriMesh s = box_surface(kLeftLo, kLeftHi, kBoxQuads);
   const int n_left = int(s.vertices.size());
   append(s, box_surface(kRightLo, kRightHi, kBoxQuads));
-  SurfaceEmbedding e(before, s.vertices, s.triangles);
+  SurfaceEmbedding e(before, s);
   ASSERT_GT(e.num_fallback(), 0);
 
   SurfaceEdit edit;
-  std::vector<Vec3> new_rest;
+  TriMesh cut;  // S after the edit
+  std::vector<Vec3>& new_rest = cut.vertices;
   std::vector<int> map(s.vertices.size(), -1);
   int next = 0, tie = -1;
   for (int v = 0; v < int(s.vertices.size()); ++v) {
@@ -479,14 +519,14 @@ void check_component_update_equals_rebuild(int count, bool refine, bool expect_m
   std::uniform_real_distribution<double> gx(0.0076, 0.0079), gyz(0.003, 0.0075);
   for (int i = 0; i < count; ++i) {
     const Vec3 p(gx(rng), gyz(rng), gyz(rng));
-    edit.inserted_rest.push_back(p);
+    ++edit.inserted;
     new_rest.push_back(p);
   }
   for (const auto& t : s.triangles)
     if (map[std::size_t(t[0])] >= 0 && map[std::size_t(t[1])] >= 0 && map[std::size_t(t[2])] >= 0)
-      edit.triangles.push_back({map[std::size_t(t[0])], map[std::size_t(t[1])], map[std::size_t(t[2])]});
-  for (int i = 0; i + 2 < count; ++i) edit.triangles.push_back({next + i, next + i + 1, next + i + 2});
-  edit.triangles.push_back({tie, next, next + 1});
+      cut.triangles.push_back({map[std::size_t(t[0])], map[std::size_t(t[1])], map[std::size_t(t[2])]});
+  for (int i = 0; i + 2 < count; ++i) cut.triangles.push_back({next + i, next + i + 1, next + i + 2});
+  cut.triangles.push_back({tie, next, next + 1});
   if (refine) {
     // Refine the leaves on the gap's walls, and mark the new leaves there as changed.
     std::vector<int> pick;
@@ -501,10 +541,10 @@ void check_component_update_equals_rebuild(int count, bool refine, bool expect_m
     if (b.max.x() >= 0.0065 && b.min.x() <= 0.0085) edit.changed_leaves.push_back(l);
   }
 
-  e.update(after, edit);
+  e.update(after, cut, edit);
   EXPECT_EQ(e.last_update_merged(), expect_merge);
   EXPECT_LT(e.last_reembedded(), e.num_vertices() / 2);
-  const SurfaceEmbedding fresh(after, new_rest, edit.triangles);
+  const SurfaceEmbedding fresh(after, cut);
   expect_same(e, fresh);
   EXPECT_EQ(e.num_fallback(), fresh.num_fallback());
 
@@ -558,21 +598,22 @@ TEST(SurfaceEmbedding, ClampedWeightsAreTheProjectionOntoTheRange) {
 // the ball (or, for a batch, anywhere in the material), and the leaves around the spot are refined.
 struct Cut {
   SurfaceEdit edit;
-  std::vector<Vec3> new_rest;
+  std::vector<Vec3> inserted_rest;  ///< the new vertices, m
+  TriMesh surface;                  ///< S after the cut
   ObjectModel new_model;
 };
 
 Cut make_cut(const ObjectModel& m, const TriMesh& s, int count, bool spread, bool refine) {
   const Vec3 spot = kCentre + Vec3(kRadii.x(), 0, 0);
   const double radius = 0.0015;
-  Cut c{{}, {}, m};
+  Cut c{{}, {}, {}, m};
   std::vector<int> map(s.vertices.size(), -1);
   int next = 0;
   for (std::size_t v = 0; v < s.vertices.size(); ++v) {
     if ((s.vertices[v] - spot).norm() < radius)
       c.edit.removed_vertices.push_back(int(v));
     else
-      map[v] = next++, c.new_rest.push_back(s.vertices[v]);
+      map[v] = next++, c.surface.vertices.push_back(s.vertices[v]);
   }
   // Removed in descending order: any order must do.
   std::reverse(c.edit.removed_vertices.begin(), c.edit.removed_vertices.end());
@@ -582,14 +623,15 @@ Cut make_cut(const ObjectModel& m, const TriMesh& s, int count, bool spread, boo
     const Vec3 d(u(rng), u(rng), u(rng));
     const Vec3 p = spread ? Vec3(Vec3(0.008, 0.008, 0.008) + 0.0059 * d)
                           : Vec3(spot - Vec3(0.8 * radius, 0, 0) + 0.7 * radius * d);
-    c.edit.inserted_rest.push_back(p);
-    c.new_rest.push_back(p);
+    c.inserted_rest.push_back(p);
+    c.surface.vertices.push_back(p);
   }
+  c.edit.inserted = count;
   // Triangles among kept vertices survive, renumbered; a fan joins consecutive new vertices.
   for (const auto& t : s.triangles)
     if (map[std::size_t(t[0])] >= 0 && map[std::size_t(t[1])] >= 0 && map[std::size_t(t[2])] >= 0)
-      c.edit.triangles.push_back({map[std::size_t(t[0])], map[std::size_t(t[1])], map[std::size_t(t[2])]});
-  for (int i = 0; i + 2 < count; ++i) c.edit.triangles.push_back({next + i, next + i + 1, next + i + 2});
+      c.surface.triangles.push_back({map[std::size_t(t[0])], map[std::size_t(t[1])], map[std::size_t(t[2])]});
+  for (int i = 0; i + 2 < count; ++i) c.surface.triangles.push_back({next + i, next + i + 1, next + i + 2});
   if (refine) {
     // Refine the leaves that meet the ball; then mark the leaves of the new tree that meet it as changed.
     std::vector<int> pick;
@@ -610,11 +652,11 @@ void check_update_equals_rebuild(int count, bool spread, bool refine, bool expec
   // Two loose vertices outside the material near the cut: they fall back, and after refinement to a child leaf.
   s.vertices.push_back(Vec3(0.0147, 0.0060, 0.0079));
   s.vertices.push_back(Vec3(0.0150, 0.0083, 0.0110));
-  SurfaceEmbedding e(m, s.vertices, s.triangles);
+  SurfaceEmbedding e(m, s);
   ASSERT_EQ(e.num_fallback(), 2);
   const Cut cut = make_cut(m, s, count, spread, refine);
   ASSERT_GT(cut.edit.removed_vertices.size(), 5u);
-  const std::vector<int> map = e.update(cut.new_model, cut.edit);
+  const std::vector<int> map = e.update(cut.new_model, cut.surface, cut.edit);
   EXPECT_EQ(e.last_update_merged(), expect_merge);
   // Only part of the surface was re-embedded.
   EXPECT_LT(e.last_reembedded(), e.num_vertices() / 2);
@@ -622,10 +664,10 @@ void check_update_equals_rebuild(int count, bool spread, bool refine, bool expec
   // The map sends kept vertices to their new slots.
   for (std::size_t v = 0; v < map.size(); ++v)
     if (map[v] >= 0) {
-      EXPECT_EQ(e.rest_vertices()[std::size_t(map[v])], s.vertices[v]);
+      EXPECT_EQ(cut.surface.vertices[std::size_t(map[v])], s.vertices[v]);
     }
 
-  const SurfaceEmbedding fresh(cut.new_model, cut.new_rest, cut.edit.triangles);
+  const SurfaceEmbedding fresh(cut.new_model, cut.surface);
   expect_same(e, fresh);
   EXPECT_EQ(e.num_fallback(), 2);
   Executor exec(2);
@@ -633,13 +675,13 @@ void check_update_equals_rebuild(int count, bool spread, bool refine, bool expec
   e.deformed_positions(affine_dofs(cut.new_model), pa, exec);
   fresh.deformed_positions(affine_dofs(cut.new_model), pb, exec);
   EXPECT_EQ(pa, pb);
-  e.deformed_normals(pa, na, exec);
-  fresh.deformed_normals(pb, nb, exec);
+  e.deformed_normals(cut.surface, pa, na, exec);
+  fresh.deformed_normals(cut.surface, pb, nb, exec);
   EXPECT_EQ(na, nb);
 
   // The naive per-level lists, updated the same way, hold the same leaf sets as the Z-curve ranges.
   NaiveEmbedding naive(m.tree(), m.root(), s.vertices);
-  EXPECT_EQ(naive.update(cut.edit.removed_vertices, cut.edit.inserted_rest), map);
+  EXPECT_EQ(naive.update(cut.edit.removed_vertices, cut.inserted_rest), map);
   for (int l = 0; l < m.num_elements(); ++l) {
     std::vector<int> z;
     for (const ZEntry& en : e.zcurve().in_cell(m.tree().leaf(l))) z.push_back(en.vertex);
@@ -661,18 +703,16 @@ double box_distance(const Box3& b, const Vec3& p) { return (b.min - p).cwiseMax(
 
 // update() keeps the rows it can in the current CSR and moves them in runs: down where rows before them went, up
 // where rows before them grew (here the leaves around the first vertices are refined, so their rows gain the
-// hanging nodes' DOFs, while vertices further on are removed). Two successive cuts, by const reference and by rvalue,
-// must each equal a fresh embedding, and the rvalue overload must take the triangles over.
-TEST(SurfaceEmbedding, SuccessiveUpdatesByReferenceAndByRvalueEqualRebuild) {
+// hanging nodes' DOFs, while vertices further on are removed). Two successive cuts of one S, followed by the
+// embedding and by a copy of it, must each equal a fresh embedding.
+TEST(SurfaceEmbedding, SuccessiveUpdatesOfAnEmbeddingAndOfItsCopyEqualRebuild) {
   const ObjectModel m = hanging_model();
-  const TriMesh s = ellipsoid(kCentre, kRadii, 48, 24);
-  SurfaceEmbedding by_ref(m, s.vertices, s.triangles), by_rvalue = by_ref;
-  std::vector<Vec3> rest = s.vertices;
-  std::vector<std::array<int32_t, 3>> triangles = s.triangles;
+  TriMesh s = ellipsoid(kCentre, kRadii, 48, 24);
+  SurfaceEmbedding e(m, s), copy = e;
   ObjectModel model = m;
   for (int round = 0; round < 2; ++round) {
     // Refine the leaves that hold the first vertices (or, second round, those of a middle band).
-    const Vec3 near = rest[round == 0 ? 0 : rest.size() / 2];
+    const Vec3 near = s.vertices[round == 0 ? 0 : s.vertices.size() / 2];
     std::vector<int> pick;
     for (int l = 0; l < model.num_elements(); ++l)
       if (box_distance(model.root().cell_box(model.tree().leaf(l)), near) < 0.0015) pick.push_back(l);
@@ -680,59 +720,51 @@ TEST(SurfaceEmbedding, SuccessiveUpdatesByReferenceAndByRvalueEqualRebuild) {
     model = model.refined(pick);
     // Remove every 7th vertex of the last third, insert 5 new ones near the first vertex, joined by a fan.
     SurfaceEdit edit;
-    std::vector<int> map(rest.size(), -1);
-    std::vector<Vec3> new_rest;
-    for (std::size_t v = 0; v < rest.size(); ++v) {
-      if (v > 2 * rest.size() / 3 && v % 7 == 0) {
+    std::vector<int> map(s.vertices.size(), -1);
+    int next = 0;
+    for (std::size_t v = 0; v < s.vertices.size(); ++v) {
+      if (v > 2 * s.vertices.size() / 3 && v % 7 == 0)
         edit.removed_vertices.push_back(int(v));
-      } else {
-        map[v] = int(new_rest.size());
-        new_rest.push_back(rest[v]);
-      }
+      else
+        map[v] = next++;
     }
-    const int next = int(new_rest.size());
-    for (int i = 0; i < 5; ++i) {
-      edit.inserted_rest.push_back(near + Vec3(-0.0002 * i, 0.0001 * i, -0.0003));
-      new_rest.push_back(edit.inserted_rest.back());
-    }
-    for (const auto& t : triangles)
+    std::vector<Vec3> inserted;
+    for (int i = 0; i < 5; ++i) inserted.push_back(near + Vec3(-0.0002 * i, 0.0001 * i, -0.0003));
+    edit.inserted = 5;
+    std::vector<std::array<int32_t, 3>> triangles;
+    for (const auto& t : s.triangles)
       if (map[std::size_t(t[0])] >= 0 && map[std::size_t(t[1])] >= 0 && map[std::size_t(t[2])] >= 0)
-        edit.triangles.push_back({map[std::size_t(t[0])], map[std::size_t(t[1])], map[std::size_t(t[2])]});
-    for (int i = 0; i + 2 < 5; ++i) edit.triangles.push_back({next + i, next + i + 1, next + i + 2});
+        triangles.push_back({map[std::size_t(t[0])], map[std::size_t(t[1])], map[std::size_t(t[2])]});
+    for (int i = 0; i + 2 < 5; ++i) triangles.push_back({next + i, next + i + 1, next + i + 2});
     for (int l = 0; l < model.num_elements(); ++l)
       if (box_distance(model.root().cell_box(model.tree().leaf(l)), near) < 0.0015) edit.changed_leaves.push_back(l);
+    s = edited(s, edit.removed_vertices, inserted, std::move(triangles));
 
-    const std::vector<int> map_ref = by_ref.update(model, edit);
-    SurfaceEdit moved = edit;
-    const std::vector<int> map_rvalue = by_rvalue.update(model, std::move(moved));
-    EXPECT_EQ(map_ref, map);
-    EXPECT_EQ(map_rvalue, map);
-    EXPECT_TRUE(moved.triangles.empty());
-    const SurfaceEmbedding fresh(model, new_rest, edit.triangles);
-    expect_same(by_ref, fresh);
-    expect_same(by_rvalue, fresh);
-    EXPECT_EQ(by_ref.last_reembedded(), by_rvalue.last_reembedded());
-    EXPECT_LT(by_ref.last_reembedded(), by_ref.num_vertices() / 2);
+    EXPECT_EQ(e.update(model, s, edit), map);
+    EXPECT_EQ(copy.update(model, s, edit), map);
+    const SurfaceEmbedding fresh(model, s);
+    expect_same(e, fresh);
+    expect_same(copy, fresh);
+    EXPECT_EQ(e.last_reembedded(), copy.last_reembedded());
+    EXPECT_LT(e.last_reembedded(), e.num_vertices() / 2);
     Executor exec(1);
     std::vector<Vec3> pa, pb, na, nb;
-    by_rvalue.deformed_positions(affine_dofs(model), pa, exec);
+    copy.deformed_positions(affine_dofs(model), pa, exec);
     fresh.deformed_positions(affine_dofs(model), pb, exec);
     EXPECT_EQ(pa, pb);
-    by_rvalue.deformed_normals(pa, na, exec);
-    fresh.deformed_normals(pb, nb, exec);
+    copy.deformed_normals(s, pa, na, exec);
+    fresh.deformed_normals(s, pb, nb, exec);
     EXPECT_EQ(na, nb);
-    rest = new_rest;
-    triangles = edit.triangles;
   }
 }
 
 TEST(SurfaceEmbedding, RebindAfterRefinementEqualsRebuild) {
   const ObjectModel m = hanging_model();
   const TriMesh s = ellipsoid(kCentre, kRadii, 48, 24);
-  SurfaceEmbedding e(m, s.vertices, s.triangles);
+  SurfaceEmbedding e(m, s);
   const ObjectModel r = m.refined({0, 3, m.num_elements() / 2, m.num_elements() - 1});
-  e.rebind(r);
-  expect_same(e, SurfaceEmbedding(r, s.vertices, s.triangles));
+  e.rebind(r, s);
+  expect_same(e, SurfaceEmbedding(r, s));
   EXPECT_LT(e.last_reembedded(), e.num_vertices());
 }
 
@@ -756,12 +788,11 @@ TEST(SurfaceEmbedding, UpdateAfterWithMaterialEqualsRebuild) {
   ASSERT_EQ(slit.tree().leaves(), before.tree().leaves());
   ASSERT_GT(slit.num_dofs(), before.num_dofs());
   const TriMesh s = ellipsoid(kCentre, kRadii, 60, 30);
-  SurfaceEmbedding e(before, s.vertices, s.triangles);
-  SurfaceEdit edit;
-  edit.triangles = s.triangles;
-  e.update(slit, edit);
+  SurfaceEmbedding e(before, s);
+  const SurfaceEdit edit;
+  e.update(slit, s, edit);
   EXPECT_EQ(e.last_reembedded(), 0);
-  expect_same(e, SurfaceEmbedding(slit, s.vertices, s.triangles));
+  expect_same(e, SurfaceEmbedding(slit, s));
 
   const ObjectModel gap = slit.with_material(
       std::make_shared<BoxSetMaterial>(std::vector<Box3>{{Vec3(0.002, 0.002, 0.002), Vec3(0.006999, 0.007, 0.014)},
@@ -770,9 +801,9 @@ TEST(SurfaceEmbedding, UpdateAfterWithMaterialEqualsRebuild) {
       {{Vec3(0.0015, 0.0065, 0.0015), Vec3(0.0075, 0.0095, 0.0145)}});
   ASSERT_LT(gap.num_elements(), slit.num_elements());
   ASSERT_LT(gap.num_dofs(), slit.num_dofs());
-  e.update(gap, edit);
+  e.update(gap, s, edit);
   EXPECT_LT(e.last_reembedded(), e.num_vertices() / 2);
-  const SurfaceEmbedding fresh(gap, s.vertices, s.triangles);
+  const SurfaceEmbedding fresh(gap, s);
   expect_same(e, fresh);
   EXPECT_GT(fresh.num_fallback(), 0);
 }
@@ -780,7 +811,7 @@ TEST(SurfaceEmbedding, UpdateAfterWithMaterialEqualsRebuild) {
 TEST(SurfaceEmbedding, ThreadCountDoesNotChangeResults) {
   const ObjectModel m = hanging_model();
   const TriMesh s = ellipsoid(kCentre, kRadii, 160, 80);  // ~12.6k vertices: several parallel chunks
-  const SurfaceEmbedding e(m, s.vertices, s.triangles);
+  const SurfaceEmbedding e(m, s);
   // A smooth non-affine field on the DOFs.
   std::vector<Vec3> x;
   for (const Vec3& X : m.dofs().dof_rest)
@@ -790,8 +821,8 @@ TEST(SurfaceEmbedding, ThreadCountDoesNotChangeResults) {
   e.deformed_positions(x, p1, one);
   e.deformed_positions(x, p2, two);
   EXPECT_EQ(p1, p2);
-  e.deformed_normals(p1, n1, one);
-  e.deformed_normals(p2, n2, two);
+  e.deformed_normals(s, p1, n1, one);
+  e.deformed_normals(s, p2, n2, two);
   EXPECT_EQ(n1, n2);
 }
 
@@ -808,23 +839,32 @@ TEST(SurfaceEmbedding, BadInputIsRejectedWithTheOffendingElement) {
   };
   auto bad_tris = s.triangles;
   bad_tris[3][1] = int32_t(s.vertices.size());
-  EXPECT_NE(message([&] { SurfaceEmbedding(m, s.vertices, bad_tris); }).find("triangle 3 corner 1"),
+  EXPECT_NE(message([&] { SurfaceEmbedding(m, TriMesh{s.vertices, bad_tris}); }).find("triangle 3 corner 1"),
             std::string::npos);
   auto bad_pts = s.vertices;
   bad_pts[5].y() = std::nan("");
-  EXPECT_NE(message([&] { SurfaceEmbedding(m, bad_pts, s.triangles); }).find("vertex 5"), std::string::npos);
+  EXPECT_NE(message([&] { SurfaceEmbedding(m, TriMesh{bad_pts, s.triangles}); }).find("vertex 5"), std::string::npos);
 
   // A failed update leaves the embedding as it was.
-  SurfaceEmbedding e(m, s.vertices, s.triangles);
+  SurfaceEmbedding e(m, s);
   const auto before = e.zcurve().entries();
   SurfaceEdit edit;
   edit.removed_vertices = {4, 7, 4};
-  edit.triangles = {};
-  EXPECT_NE(message([&] { e.update(m, edit); }).find("removed_vertices[2] = 4 is listed twice"), std::string::npos);
+  const TriMesh no_triangles{s.vertices, {}};
+  EXPECT_NE(message([&] { e.update(m, no_triangles, edit); }).find("removed_vertices[2] = 4 is listed twice"),
+            std::string::npos);
   edit.removed_vertices = {4};
-  edit.triangles = {{0, 1, int32_t(s.vertices.size() - 1)}};
-  EXPECT_NE(message([&] { e.update(m, edit); }).find("triangle 0 corner 2"), std::string::npos);
+  const TriMesh bad_corner = edited(s, {4}, {}, {{0, 1, int32_t(s.vertices.size() - 1)}});
+  EXPECT_NE(message([&] { e.update(m, bad_corner, edit); }).find("triangle 0 corner 2"), std::string::npos);
+  // S must already be the edited surface: one vertex fewer here.
+  EXPECT_NE(message([&] { e.update(m, s, edit); }).find("the surface has"), std::string::npos);
   EXPECT_EQ(e.zcurve().entries(), before);
+  // The calls that read S check that it is the surface the embedding is built for.
+  std::vector<Vec3> n, rest = s.vertices;
+  Executor one(1);
+  EXPECT_NE(message([&] { e.deformed_normals(bad_corner, rest, n, one); }).find("the surface has"),
+            std::string::npos);
+  EXPECT_NE(message([&] { e.rebind(m, bad_corner); }).find("the surface has"), std::string::npos);
   std::vector<Vec3> p;
   Executor exec(1);
   EXPECT_NE(message([&] { e.deformed_positions({Vec3::Zero()}, p, exec); }).find("DOF positions"), std::string::npos);

@@ -81,9 +81,8 @@ SceneObject build_scene_object(const Scene& scene, bool cuttable) {
                        ", at most 2e5)");
     out.surface = sim::closed_box_grid(box, 24);
     const auto t0 = sim::Clock::now();
-    out.graph = std::make_shared<sim::MaterialGraph>(sim::box_tet_mesh(box, h));
+    material = std::make_shared<sim::MaterialGraph>(sim::box_tet_mesh(box, h));
     out.graph_ms = sim::ms_since(t0);
-    material = out.graph;
   } else if (o.surface_is_box) {
     material = std::make_shared<sim::BoxMaterial>(box3(o.surface_box));
     out.surface = sim::closed_box_grid(box3(o.surface_box), 1);
@@ -108,13 +107,12 @@ SceneObject build_scene_object(const Scene& scene, bool cuttable) {
       if (!g.warning.empty()) out.warnings.push_back("/object/material_graph: " + g.warning);
       out.graph_source = g.from_cache ? MaterialGraphSource::cache : MaterialGraphSource::meshed;
       out.graph_ms = g.ms;
-      out.graph = std::make_shared<sim::MaterialGraph>(std::move(g.mesh));
+      material = std::make_shared<sim::MaterialGraph>(std::move(g.mesh));
     } catch (const cutting::MeshingError& e) {
       throw SceneError(scene.file + ": /object/material_graph: " + e.what());
     } catch (const std::invalid_argument& e) {
       throw SceneError(scene.file + ": /object/material_graph: " + e.what());
     }
-    material = out.graph;
   }
   const sim::Box3 bounds = sim::bounds(out.surface);
 

@@ -128,7 +128,6 @@ World::Impl::Impl(const Scene& s, const WorldOptions& o)
   // cannot intersect itself).
   object.surface = std::move(built.surface);
   object.cut_faces.assign(object.surface.triangles.size(), 0);
-  object.graph = built.graph;
   object.surface_checked = true;
   // The grid that finds S's faces near a blade, only for a world that cuts (O(|S|), once); otherwise the first
   // cut_now builds it.
@@ -195,13 +194,13 @@ void World::Impl::check_start() {
 void World::Impl::bind_surface() {
   // S embedded in T by the Z-curve list (SPEC §2.4); the deformed surface follows the DOFs.
   const sim::ObjectModel& m0 = sim->model();
-  embedding = std::make_unique<sim::SurfaceEmbedding>(m0, object.surface.vertices, object.surface.triangles);
+  embedding = std::make_unique<sim::SurfaceEmbedding>(m0, object.surface);
   if (embedding->num_fallback() > 0)
     warnings.push_back(std::to_string(embedding->num_fallback()) +
                        " surface vertices lie outside every leaf and are bound to the nearest one");
   update_surface();
   if (!rendering) return;
-  if (!object.graph) {
+  if (!m0.material_graph()) {
     const sim::Box3 box{v3(scene.object.surface_box.min), v3(scene.object.surface_box.max)};
     box_tissue = embed_surface(m0, sim::box_face_grids(box, 32));
   }
@@ -215,7 +214,7 @@ void World::Impl::update_surface() {
     return;
   }
   embedding->deformed_positions(sim->state().x, deformed, surface_exec);
-  embedding->deformed_normals(deformed, deformed_normals, surface_exec);
+  embedding->deformed_normals(object.surface, deformed, deformed_normals, surface_exec);
 }
 
 sim::Pose World::Impl::tool_pose(std::size_t i, double t) const {
@@ -233,7 +232,6 @@ CutSummary World::Impl::cut(std::size_t i, double t, bool scheduled) {
   for (sim::Vec3& p : req.blade.vertices) p = pose.apply(p);
   req.inscribed_radius = tr.inscribed_radius;
   const cutting::CutOutcome o = cutting::apply_cut(object, *sim, *embedding, req, cut_options);
-  if (object.removed && !sim->empty()) sim->remove_object();  // nothing left to simulate: time still runs
 
   CutSummary c;
   c.t = t;
@@ -284,7 +282,7 @@ void World::Impl::record_counts(Report& r) const {
   r.elements = m.num_elements();
   r.dofs = m.num_dofs();
   r.hanging_slots = m.dofs().hanging_slots;
-  r.tets = object.graph ? object.graph->num_tets() : 0;
+  r.tets = sim->empty() || !m.material_graph() ? 0 : m.material_graph()->num_tets();
   r.surface_vertices = long(surface.num_vertices());
   r.surface_triangles = long(surface.num_triangles());
   const sim::SurfaceCheck check = sim::check_surface(surface);
@@ -391,7 +389,7 @@ RenderScene World::render_scene() const {
   model.dofs().prolong(m->sim->state().x, slots);
   if (m->sim->empty()) {
     // Nothing left to draw of the tissue.
-  } else if (!m->object.graph) {
+  } else if (!model.material_graph()) {
     rs.meshes.push_back(tissue_mesh(model, m->box_tissue, slots));
   } else {
     // The mesh surface S as the Z-curve embedding moved it after the last step, cut faces tinted.

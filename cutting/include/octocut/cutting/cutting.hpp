@@ -2,26 +2,16 @@
 // The cut pipeline (SPEC §4, paper §3–4): one volumetric, non-progressive cut of a deformable object by a closed
 // blade, in five timed stages, as one transaction. No CGAL type appears here; the exact surface boolean lives in
 // cutting/src/surface_cut.cpp.
-#include <array>
 #include <memory>
 #include <string>
-#include <string_view>
 #include <vector>
 
 #include "octocut/cutting/surface_editor.hpp"
 #include "octocut/sim/embedding.hpp"
-#include "octocut/sim/material_graph.hpp"
 #include "octocut/sim/simulator.hpp"
 #include "octocut/sim/surface.hpp"
 
 namespace octocut::cutting {
-
-/// The stages of one cut, in order, as they are named in the report's `cuts[].ms` (SPEC §8).
-inline constexpr std::array<std::string_view, 7> kStageNames = {
-    "back_transform", "surface", "material_graph", "refine", "node_split", "embedding", "solver_update"};
-
-/// True when this build contains the cut pipeline.
-bool pipeline_available();
 
 /// What happens to material that a cut separates from every handle.
 enum class FragmentPolicy {
@@ -54,12 +44,12 @@ struct SurfaceGrid {
   ~SurfaceGrid() = default;
 };
 
-/// The parts of one deformable object that cuts edit, besides the simulator and the embedding.
+/// The parts of one deformable object that cuts edit, besides the simulator and the embedding. M is not here: the
+/// simulator's model owns it (sim::ObjectModel::material_graph()), and a cut hands M' over with the new revision.
 struct CutObject {
-  sim::TriMesh surface;                              ///< S in rest space, m
-  std::vector<char> cut_faces;                       ///< 1 for a triangle of S that came from a blade (|F|)
-  std::shared_ptr<const sim::MaterialGraph> graph;   ///< M; it must be the model's material source
-  bool removed = false;                              ///< every element was cut away: nothing is simulated any more
+  sim::TriMesh surface;         ///< S in rest space, m: its one copy. The grid and the sim::SurfaceEmbedding index it
+                                ///< and are given it; apply_cut edits it in place
+  std::vector<char> cut_faces;  ///< 1 for a triangle of S that came from a blade (|F|)
   bool surface_checked = false;  ///< S is known to be closed, manifold and free of self-intersections (checked when
                                  ///< it was loaded). Cuts then skip CGAL's own self-intersection check of S near the
                                  ///< blade; a cut with CutOptions::verify keeps this true (its changed faces are
@@ -82,7 +72,7 @@ struct CutRequest {
   double inscribed_radius = 0.0;   ///< radius of the blade's largest inscribed sphere, m (paper §4.4.1's r)
 };
 
-/// Wall time of each stage, ms, in the order of kStageNames, and the total.
+/// Wall time of each stage, ms, in the order of SPEC §4 (the report's `cuts[].ms`, SPEC §8), and the total.
 struct CutStageMs {
   double back_transform = 0.0, surface = 0.0, material_graph = 0.0, refine = 0.0, node_split = 0.0,
          embedding = 0.0, solver_update = 0.0, total = 0.0;
@@ -114,7 +104,10 @@ struct CutOutcome {
 /// 3. material_graph: the tets of M that meet B'_i are removed.
 /// 4. refine (leaves meeting B'_i with edge > r / sqrt(3), within max_level), then node_split (occupancy and
 ///    connectivity of the touched leaves, DOFs by node splitting), then loose fragments per `options`.
-/// 5. embedding: the Z-curve list and weights, then the solver's symbolic analysis.
+/// 5. embedding: S compacted in place (the vertices no triangle uses go), the embedding updated for it, then the
+///    solver's symbolic analysis.
+/// The simulator's model must hold M as its material (sim::ObjectModel::material_graph()); the cut is skipped
+/// otherwise. `embedding` must be the embedding of object.surface in the simulator's model.
 /// The cut is a transaction: on any failure (a stage throws, the boolean fails its checks, numerical trouble) the
 /// object, the simulator and the embedding are left exactly as they were and the outcome is "skipped" with the reason.
 /// A blade that changes nothing is a "no-op". Never throws for geometric or numerical trouble.

@@ -22,6 +22,7 @@
 #include "octocut/sim/object.hpp"
 #include "octocut/sim/octree.hpp"
 #include "octocut/sim/parallel.hpp"
+#include "octocut/sim/surface.hpp"
 #include "octocut/sim/types.hpp"
 
 namespace octocut::sim {
@@ -96,6 +97,15 @@ class ZCurveList {
   [[nodiscard]] bool last_update_merged() const { return m_merged; }
 
  private:
+  // update(): the old-to-new map into `map` (n_old), -1 for a removed vertex; throws for a bad or repeated index.
+  static void removal_map(std::span<const int> removed, std::size_t n_old, std::vector<int>& map);
+  // update(): deletes the entries of the removed vertices and renumbers the others by `map`.
+  void erase_and_renumber(std::span<const int> map);
+  // update(): inserts the sorted m_added into the entries, each at the place a binary search finds.
+  void insert_one_by_one();
+  // update(): merges the sorted m_added into the entries from the back.
+  void merge_batch();
+
   RootGeometry m_root;
   detail::RoomyVector<ZEntry> m_entries;  ///< sorted by (code, vertex) (|V|)
   bool m_merged = false;
@@ -129,26 +139,33 @@ VertexEmbedding embed_vertex(const Octree& tree, const RootGeometry& root, const
 /// returned unchanged.
 std::array<double, 8> clamp_fallback_weights(const std::array<double, 8>& w);
 
-/// A change of the surface after a cut: the vertices that go, the vertices that come, and the new triangles.
+/// How a cut changed S, for SurfaceEmbedding::update: S itself already holds the new vertices and triangles.
 struct SurfaceEdit {
-  std::vector<int> removed_vertices;                 ///< old vertex indices, any order, no duplicates
-  std::vector<Vec3> inserted_rest;                   ///< new vertices, m; they get indices k, k+1, ... after the k kept ones
-  std::vector<std::array<int32_t, 3>> triangles;     ///< the complete new triangle list, in new vertex indices (|F'|)
-  std::vector<int> changed_leaves;                   ///< leaves of the new tree whose vertices must be re-embedded
+  std::vector<int> removed_vertices;  ///< indices before the change, any order, no duplicates
+  int inserted = 0;                   ///< vertices added: the last `inserted` vertices of S, after the k kept ones
+  std::vector<int> changed_leaves;    ///< leaves of the new tree whose vertices must be re-embedded
 };
 
 /// The surface S bound to an object model (constant per model revision; the deformed DOF positions come per step).
+///
+/// An index over S, as FaceGrid is one: it keeps no copy of S's vertices or triangles. Every call that reads S is
+/// given it (`surface`: rest vertices |V|, m, and triangles |F|), and between calls S changes only as update() is
+/// then told. Each such call checks that S still has the |V| and |F| the embedding was built or last updated for
+/// and throws std::invalid_argument otherwise.
 class SurfaceEmbedding {
  public:
-  /// Embeds the rest vertices (|V|, m) and triangles (|F|) of S in `model`; vertices in no leaf follow the fallback
-  /// rule at the top of this file (material components from model.dofs(), anchors along the triangles). Throws
+  /// Embeds the rest vertices and triangles of `surface` in `model`; vertices in no leaf follow the fallback rule at
+  /// the top of this file (material components from model.dofs(), anchors along the triangles). Throws
   /// std::invalid_argument naming the offending vertex or triangle for a non-finite vertex or a triangle index out
   /// of range, or when the model has no leaf.
-  SurfaceEmbedding(const ObjectModel& model, std::vector<Vec3> rest, std::vector<std::array<int32_t, 3>> triangles);
+  SurfaceEmbedding(const ObjectModel& model, const TriMesh& surface);
 
-  [[nodiscard]] int num_vertices() const { return int(m_rest.size()); }
-  [[nodiscard]] const std::vector<Vec3>& rest_vertices() const { return m_rest; }          ///< m (|V|)
-  [[nodiscard]] const std::vector<std::array<int32_t, 3>>& triangles() const { return m_triangles; }  ///< (|F|)
+  /// Number of vertices of the surface it is bound to, |V|.
+  [[nodiscard]] int num_vertices() const { return int(m_embedding.size()); }
+  /// Number of triangles of the surface it is bound to, |F|.
+  [[nodiscard]] int num_triangles() const { return int(m_tri.size() / 3); }
+  /// Whether `surface` has the |V| and |F| this embedding is built for (what every call taking S checks).
+  [[nodiscard]] bool matches(const TriMesh& surface) const;
   [[nodiscard]] const ZCurveList& zcurve() const { return m_zcurve; }
   /// The Z-curve entries of the vertices inside leaf `leaf` of the current model's tree.
   [[nodiscard]] std::span<const ZEntry> vertices_in_leaf(int leaf) const;
@@ -162,29 +179,28 @@ class SurfaceEmbedding {
 
   /// Deformed vertex positions (|V|, m) from DOF positions (num_dofs, m), parallel over vertices.
   void deformed_positions(const std::vector<Vec3>& x_dofs, std::vector<Vec3>& positions, Executor& exec) const;
-  /// Area-weighted unit vertex normals (|V|) of the mesh at `positions` (|V|, m), parallel over vertices; equal bit
-  /// for bit to sim::vertex_normals(positions, triangles()).
-  void deformed_normals(const std::vector<Vec3>& positions, std::vector<Vec3>& normals, Executor& exec) const;
+  /// Area-weighted unit vertex normals (|V|) of `surface`'s triangles at `positions` (|V|, m), parallel over
+  /// vertices; equal bit for bit to sim::vertex_normals(positions, surface.triangles).
+  void deformed_normals(const TriMesh& surface, const std::vector<Vec3>& positions, std::vector<Vec3>& normals,
+                        Executor& exec) const;
   /// The same with a caller-owned scratch array for the face normals (|F|, m^2), which saves its allocation per step.
-  void deformed_normals(const std::vector<Vec3>& positions, std::vector<Vec3>& normals, Executor& exec,
-                        std::vector<Vec3>& face_normals) const;
+  void deformed_normals(const TriMesh& surface, const std::vector<Vec3>& positions, std::vector<Vec3>& normals,
+                        Executor& exec, std::vector<Vec3>& face_normals) const;
 
-  /// Applies a cut: removes and inserts vertices (ZCurveList::update), replaces the triangles, re-embeds only the
-  /// new vertices, the vertices of leaves that are new in `new_model` or listed in edit.changed_leaves, the vertices
-  /// whose old leaf is gone, and all fallback vertices (their anchors and components depend on the new surface and
-  /// the new DOFs). A vertex that keeps its leaf and weights keeps its composed row, DOFs renumbered, when the 8
-  /// rows of P of its leaf are the same up to that renumbering; the others are composed anew through the new P. The result equals a fresh SurfaceEmbedding of
-  /// the new surface in `new_model`. Returns the old-to-new vertex map (-1 for a removed vertex). Throws
-  /// std::invalid_argument for bad indices or a model with another root cube or no leaf; the embedding is
-  /// unchanged then.
-  std::vector<int> update(const ObjectModel& new_model, const SurfaceEdit& edit);
-  /// The same, taking the edit's triangle list over instead of copying it (the edit is left valid but unspecified).
-  /// Kept vertices before the first removed one stay in place; the others move down in runs; the vertex-to-triangle
-  /// adjacency is counted while the triangles are validated; the composed rows that are kept stay where they are
-  /// or move in runs inside the current CSR. Equal bit for bit to the const& overload.
-  std::vector<int> update(const ObjectModel& new_model, SurfaceEdit&& edit);
-  /// Moves to a new revision of the model with the same surface (refinement).
-  void rebind(const ObjectModel& new_model);
+  /// Follows a cut. `surface` is S after the cut: the vertices kept from the S this embedding is built for, in their
+  /// old order, then edit.inserted new ones, and the complete new triangle list. Removes and inserts vertices
+  /// (ZCurveList::update), re-embeds only the new vertices, the vertices of leaves that are new in `new_model` or
+  /// listed in edit.changed_leaves, the vertices whose old leaf is gone, and all fallback vertices (their anchors and
+  /// components depend on the new surface and the new DOFs). A vertex that keeps its leaf and weights keeps its
+  /// composed row, DOFs renumbered, when the 8 rows of P of its leaf are the same up to that renumbering; the others
+  /// are composed anew through the new P. The result equals a fresh SurfaceEmbedding of `surface` in `new_model`.
+  /// Returns the old-to-new vertex map (-1 for a removed vertex). Throws std::invalid_argument for bad indices, a
+  /// surface whose |V| is not the old one less the removed plus the inserted, or a model with another root cube or
+  /// no leaf; the embedding is unchanged then.
+  std::vector<int> update(const ObjectModel& new_model, const TriMesh& surface, const SurfaceEdit& edit);
+  /// Moves to a new revision of the model with the same surface (refinement). Throws std::invalid_argument when
+  /// `surface` does not match this embedding, or as update() does.
+  void rebind(const ObjectModel& new_model, const TriMesh& surface);
 
   /// True when the last update() merged a sorted batch instead of inserting one by one.
   [[nodiscard]] bool last_update_merged() const { return m_zcurve.last_update_merged(); }
@@ -192,30 +208,48 @@ class SurfaceEmbedding {
   [[nodiscard]] int last_reembedded() const { return m_last_reembedded; }
 
  private:
+  // What update() keeps from the old model revision: its leaves that are leaves of the new tree too, and which of
+  // those have the same 8 rows of P up to the DOF renumbering.
+  struct KeptLeaves;
+  // Throws unless `surface` matches this embedding; `who` names the caller.
+  void check_matches(const TriMesh& surface, const char* who) const;
+  // update(): validates the edit against the model and the surface, touching only scratch (the triangles' corner
+  // counts); throws std::invalid_argument.
+  void check_update(const ObjectModel& new_model, const TriMesh& surface, const SurfaceEdit& edit);
+  // update(): which leaves and rows of P `new_model` keeps from the bound model.
+  [[nodiscard]] KeptLeaves match_kept_leaves(const ObjectModel& new_model) const;
+  // update(): moves the kept vertices' embeddings down to their new indices (map: old to new), renumbers their
+  // leaves, and flags those to re-embed: the fallback ones, those whose leaf is gone, and the `inserted` new ones.
+  // Vertices before `first_removed` stay in place; the others move down in runs.
+  void move_kept_vertices(std::span<const int> map, std::size_t first_removed, std::size_t inserted,
+                          const KeptLeaves& kept);
+  // update(): flags the vertices of the leaves of `tree` that are new (not kept) or listed in `changed`.
+  void flag_leaves(const Octree& tree, const KeptLeaves& kept, std::span<const int> changed);
+  // update(): marks vertex k (new index) for re-embedding, once; it composes its row anew.
+  void flag(std::size_t k);
   // Re-embeds the vertices listed in `redo` (ascending vertex indices) in m_tree, or all of them when `all` is set.
-  // Every other vertex must be regularly bound, and the adjacency must be built for m_triangles (fallback anchors).
-  void embed(const ObjectModel& model, std::span<const int> redo, bool all);
+  // Every other vertex must be regularly bound, and the adjacency must be built for surface.triangles (fallback
+  // anchors).
+  void embed(const ObjectModel& model, const TriMesh& surface, std::span<const int> redo, bool all);
   // Composes every vertex through P into the CSR and keeps P's rows for the next update(). Vertex v with
   // reuse_from[v] >= 0 takes the current row of that (old) vertex with its DOFs renumbered by dof_map (old num_dofs),
   // which the caller has shown to equal the row composed anew; empty reuse_from composes all anew. reuse_from must
   // be increasing on the vertices that reuse a row (kept vertices keep their order): the kept rows then stay in the
   // current CSR, moved in runs, and only the new rows are composed.
   void compose(const DofMap& P, std::span<const int> reuse_from, std::span<const int> dof_map);
+  // compose() with empty reuse_from: every row anew, in vertex order.
+  void compose_all(const DofMap& P);
+  // compose() with reuse_from: the kept rows moved in runs inside the CSR, the others composed anew.
+  void compose_reusing(const DofMap& P, std::span<const int> reuse_from, std::span<const int> dof_map);
   // Validates `triangles` against `num_vertices` (throws as check_triangles does) and counts the corners at each
   // vertex into m_next_tri_begin, the first step of build_adjacency(); touches no other member.
   void count_corners(const std::vector<std::array<int32_t, 3>>& triangles, std::size_t num_vertices);
-  // Builds the vertex-to-triangle CSR of m_triangles from the counts of count_corners(m_triangles, |V|).
-  void build_adjacency();
-  void check_triangles(const std::vector<std::array<int32_t, 3>>& triangles, std::size_t num_vertices) const;
-  // Both update() overloads: takes the triangle list over from `take` (== &edit.triangles) when it is given, copies
-  // edit.triangles otherwise.
-  std::vector<int> apply(const ObjectModel& new_model, const SurfaceEdit& edit,
-                         std::vector<std::array<int32_t, 3>>* take);
+  // Builds the vertex-to-triangle CSR of `triangles` (|V| vertices) from the counts of count_corners(triangles, |V|).
+  void build_adjacency(const std::vector<std::array<int32_t, 3>>& triangles, std::size_t num_vertices);
+  static void check_triangles(const std::vector<std::array<int32_t, 3>>& triangles, std::size_t num_vertices);
 
   RootGeometry m_root;
   Octree m_tree;                                   ///< the tree of the model the vertices are bound to
-  detail::RoomyVector<Vec3> m_rest;                ///< rest positions, m (|V|)
-  detail::RoomyVector<std::array<int32_t, 3>> m_triangles;  ///< (|F|)
   ZCurveList m_zcurve;                             ///< (|V|)
   detail::RoomyVector<VertexEmbedding> m_embedding;  ///< (|V|)
   std::vector<int> m_begin;                        ///< CSR row starts of the composed weights (|V| + 1)

@@ -13,6 +13,7 @@
 #include "octocut/sim/dof_map.hpp"
 #include "octocut/sim/hex_element.hpp"
 #include "octocut/sim/material.hpp"
+#include "octocut/sim/material_graph.hpp"
 #include "octocut/sim/octree.hpp"
 #include "octocut/sim/pose.hpp"
 
@@ -124,6 +125,11 @@ class ObjectModel {
   [[nodiscard]] const RootGeometry& root() const { return m_root; }
   [[nodiscard]] const DofMap& dofs() const { return m_dofs; }
   [[nodiscard]] const MaterialSource& material() const { return *m_material; }
+  /// material() as the material graph M (SPEC §2.2) when it is one (a mesh object), else null (an exact box
+  /// material). The model is M's one owner: the cut pipeline and the reports read M here.
+  [[nodiscard]] const MaterialGraph* material_graph() const {
+    return dynamic_cast<const MaterialGraph*>(m_material.get());
+  }
   [[nodiscard]] const MaterialParams& params() const { return m_params; }
   [[nodiscard]] const std::vector<HandleSpec>& handles() const { return m_handles; }
   [[nodiscard]] int max_level() const { return m_max_level; }

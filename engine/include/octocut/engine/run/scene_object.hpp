@@ -30,11 +30,11 @@ enum class MaterialGraphSource {
 /// The report's name of a MaterialGraphSource: "box", "cache" or "meshed".
 const char* to_string(MaterialGraphSource source);
 
-/// A scene's deformable object: its model, its rest surface S and, for mesh surfaces, its material graph M.
+/// A scene's deformable object: its model (which holds M: model.material_graph(), null for a box primitive that
+/// nothing cuts) and its rest surface S.
 struct SceneObject {
   sim::ObjectModel model;
   sim::TriMesh surface;                                ///< rest surface S, m; a box primitive's is its 12 triangles
-  std::shared_ptr<const sim::MaterialGraph> graph;     ///< M; null for a box primitive that no tool cuts
   MaterialGraphSource graph_source = MaterialGraphSource::box;
   double graph_ms = 0.0;                               ///< time to obtain M, ms
   std::vector<std::string> warnings;                   ///< from loading the mesh and the cache

@@ -292,7 +292,9 @@ TEST(SurfaceEmbedding, FallbackSearchMatchesTheBruteForceScan) {
 
 // ---- The fallback rule respects material components (SPEC §2.4) ----------------------------------------------------
 
-// A closed axis-aligned box [lo, hi] (m) with n quads per edge, welded, counter-clockwise seen from outside.
+// A closed axis-aligned box [lo, hi] (m) with n quads along EVERY edge whatever its length (unlike
+// sim::closed_box_grid, whose cells are about square), welded, counter-clockwise seen from outside. The fallback tests
+// count vertices per face with this layout.
 TriMesh box_surface(const Vec3& lo, const Vec3& hi, int n) {
   TriMesh m;
   std::vector<int> id(std::size_t((n + 1) * (n + 1) * (n + 1)), -1);

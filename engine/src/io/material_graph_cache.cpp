@@ -117,7 +117,12 @@ std::string decode_entry(std::string_view bytes, const std::string& key, double 
 std::filesystem::path cache_directory() {
   if (const char* d = std::getenv("OCTOCUT_CACHE_DIR"); d && *d) return d;
   if (const char* x = std::getenv("XDG_CACHE_HOME"); x && *x) return std::filesystem::path(x) / "octocut";
-  return OCTOCUT_DEFAULT_CACHE_DIR;
+  // The build tree's cache/ while that tree exists; an installed octocut elsewhere uses ~/.cache/octocut.
+  const std::filesystem::path build_cache = OCTOCUT_DEFAULT_CACHE_DIR;
+  std::error_code ec;
+  if (std::filesystem::is_directory(build_cache.parent_path(), ec)) return build_cache;
+  if (const char* h = std::getenv("HOME"); h && *h) return std::filesystem::path(h) / ".cache" / "octocut";
+  return build_cache;
 }
 
 std::string material_graph_key(const sim::TriMesh& surface, double cell_size) {

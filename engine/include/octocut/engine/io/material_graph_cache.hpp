@@ -8,8 +8,9 @@
 
 namespace octocut::engine {
 
-/// Where cache entries go: $OCTOCUT_CACHE_DIR if set, else $XDG_CACHE_HOME/octocut, else the build tree's
-/// `cache/` folder. Entries live in the `material_graph/` subfolder.
+/// Where cache entries go: $OCTOCUT_CACHE_DIR if set, else $XDG_CACHE_HOME/octocut, else the build tree's `cache/`
+/// folder while the build tree exists (an installed octocut used elsewhere: $HOME/.cache/octocut). Entries live in
+/// the `material_graph/` subfolder.
 std::filesystem::path cache_directory();
 
 /// The content key of a meshing job: a 128-bit hash (32 hex digits) of the surface's vertex and triangle bytes, the

@@ -100,7 +100,8 @@ class World {
 
   /// The report so far: counts of the current model and of S, the cuts, probes, energies, stability counters,
   /// warnings, the step timings and the subsystems built. Run-loop fields (frames, render timings, wall time,
-  /// renderer and frame writer) are left for the run loop to fill in.
+  /// renderer and frame writer) are left for the run loop to fill in. O(|S|) (it checks S's topology and volume):
+  /// an interactive loop calls it now and then, not every frame.
   [[nodiscard]] Report report() const;
 
   /// The scene this world runs (defaults filled in).

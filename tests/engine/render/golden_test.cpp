@@ -1,5 +1,5 @@
 // Golden images rendered headless (Mesa llvmpipe in CI): small deterministic scenes compared with PNGs under
-// tests/render/golden/ within the tolerance stated in each test's JSON file, plus checks against independent truth
+// tests/engine/render/golden/ within the tolerance stated in each test's JSON file, plus checks against independent truth
 // (the background colour, the mask, overlay colours at projected points, cut faces tinted red).
 //
 // Regenerate the references on purpose with OCTOCUT_REGENERATE_GOLDEN=1 build/bin/render_golden_test; review the

@@ -27,7 +27,7 @@ inline constexpr double k_asset_grid_mm = 1.0 / 65536.0;
 /// 6 mm) over 284° of ellipse angle, tapered at both horns and closed by rounded caps. The profile
 /// lies on the outward side of the spine in the spine's normal plane; because the outward normal rays of a strictly
 /// convex curve never meet, the swept body cannot intersect itself (the caps extend straight along the end tangents
-/// into the opening). Measured (tests/app/assets_test.cpp): 45.0 × 26.5 × 7.1 mm, arc span about 300° around the box
+/// into the opening). Measured (tests/engine/assets/assets_test.cpp): 45.0 × 26.5 × 7.1 mm, arc span about 300° around the box
 /// centre, wedge 8-12 mm wide (posterior wider than anterior), 6.0-6.9 mm tall at the periphery of the body, 1.0-1.3
 /// mm thick 0.5 mm from the inner edge, about 2510 mm³. Throws std::invalid_argument for target_vertices < 1000.
 sim::TriMesh make_meniscus(int target_vertices);

@@ -1,7 +1,7 @@
 #pragma once
 // The cut pipeline (SPEC §4, paper §3–4): one volumetric, non-progressive cut of a deformable object by a closed
 // blade, in five timed stages, as one transaction. No CGAL type appears here; the exact surface boolean lives in
-// cutting/src/surface_cut.cpp.
+// cutting/src/surface_cut*.cpp (one file per phase).
 #include <memory>
 #include <string>
 #include <vector>

@@ -57,7 +57,6 @@ class Run {
   void start_renderer() {
     if (!m_world.renders()) return;
     m_renderer = make_renderer();
-    m_subsystems.renderer = true;
   }
 
   // The whole timeline: the first frame at rest, then steps, frames, surfaces and the progress line.
@@ -102,13 +101,13 @@ class Run {
     }
     Report report = m_world.report();
     for (std::string& w : m_warnings) report.warnings.push_back(std::move(w));
+    report.subsystems.renderer = m_renderer != nullptr;
+    report.subsystems.frame_writer = m_writer != nullptr;
     if (m_writer) {
       report.frame_write_ms = TimingSummary::of(m_writer->write_ms());
       report.frames = m_writer->written();
       m_writer.reset();
     }
-    report.subsystems.renderer = m_subsystems.renderer;
-    report.subsystems.frame_writer = m_subsystems.frame_writer;
     report.render_ms = TimingSummary::of(m_render_ms);
     report.frames_rendered = long(m_render_ms.size());
     report.wall_time_s = sim::ms_since(wall0) / 1000.0;
@@ -132,7 +131,6 @@ class Run {
     fs::create_directories(frames_dir, ec);
     if (ec) throw std::runtime_error(frames_dir.string() + ": cannot create the frames directory: " + ec.message());
     m_writer = std::make_unique<FrameWriter>(frames_dir, 4);
-    m_subsystems.frame_writer = true;
   }
 
   void render_frame() {
@@ -156,7 +154,6 @@ class Run {
   fs::path m_out;
   std::unique_ptr<Renderer> m_renderer;
   std::unique_ptr<FrameWriter> m_writer;
-  Subsystems m_subsystems;
   std::vector<double> m_render_ms;
   std::vector<std::string> m_warnings;
   long m_frame = 0;
@@ -211,7 +208,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
     report.status = "failed";
     report.error = result.error;
     write_report(result, report);
-    if (result.exit_code != 2) result.exit_code = 2;  // the render error is the one to report
+    result.exit_code = 2;  // the render error is the one to report, also when the report could not be written
     return result;
   }
 

@@ -15,13 +15,6 @@
 
 namespace octocut::engine {
 
-namespace {
-
-sim::Vec3 v3(const std::array<double, 3>& a) { return {a[0], a[1], a[2]}; }
-sim::Box3 box3(const SceneBox& b) { return {v3(b.min), v3(b.max)}; }
-
-}  // namespace
-
 const char* to_string(MaterialGraphSource source) {
   switch (source) {
     case MaterialGraphSource::box: return "box";
@@ -72,7 +65,7 @@ SceneObject build_scene_object(const Scene& scene, bool cuttable) {
   if (o.surface_is_box && (cuttable || scene_cuts(scene))) {
     // A box that tools cut: S as a welded grid and M as a Kuhn tet grid at the cell size, whose material is
     // exactly the box.
-    const sim::Box3 box = box3(o.surface_box);
+    const sim::Box3 box = to_box3(o.surface_box);
     const double h = o.material_graph_cell_size;
     const double cells = box.volume() / (h * h * h);
     if (!(cells <= kMaxMaterialCells))
@@ -84,8 +77,8 @@ SceneObject build_scene_object(const Scene& scene, bool cuttable) {
     material = std::make_shared<sim::MaterialGraph>(sim::box_tet_mesh(box, h));
     out.graph_ms = sim::ms_since(t0);
   } else if (o.surface_is_box) {
-    material = std::make_shared<sim::BoxMaterial>(box3(o.surface_box));
-    out.surface = sim::closed_box_grid(box3(o.surface_box), 1);
+    material = std::make_shared<sim::BoxMaterial>(to_box3(o.surface_box));
+    out.surface = sim::closed_box_grid(to_box3(o.surface_box), 1);
   } else {
     // The mesh: loaded, welded, validated and scaled to metres.
     try {
@@ -119,7 +112,7 @@ SceneObject build_scene_object(const Scene& scene, bool cuttable) {
   // Root cube: given, or the material's bounding box made cubic and grown by 5%.
   sim::OctreeSpec spec;
   if (o.octree.has_root) {
-    spec.root = {v3(o.octree.root_min), o.octree.root_size};
+    spec.root = {to_vec3(o.octree.root_min), o.octree.root_size};
     const sim::Box3 root_box{spec.root.min, spec.root.min + sim::Vec3::Constant(spec.root.size)};
     if (!root_box.contains(bounds.min, 1e-12 * spec.root.size) || !root_box.contains(bounds.max, 1e-12 * spec.root.size))
       throw SceneError(scene.file + ": /object/octree/root: the root cube does not contain the object");
@@ -130,12 +123,12 @@ SceneObject build_scene_object(const Scene& scene, bool cuttable) {
   // `uniform`: no adaptivity, the whole object at max_level.
   spec.base_level = o.octree.uniform ? o.octree.max_level : o.octree.base_level;
   spec.max_level = o.octree.max_level;
-  for (const RefineRegion& r : o.octree.refine) spec.refine.push_back({box3(r.box), r.level});
+  for (const RefineRegion& r : o.octree.refine) spec.refine.push_back({to_box3(r.box), r.level});
 
   std::vector<sim::HandleSpec> handles;
   for (const Handle& h : o.handles) {
-    sim::HandleSpec hs{box3(h.box), {}};
-    for (const HandleKeyframe& k : h.keyframes) hs.keyframes.push_back({k.t, v3(k.translation), v3(k.rotation_deg)});
+    sim::HandleSpec hs{to_box3(h.box), {}};
+    for (const HandleKeyframe& k : h.keyframes) hs.keyframes.push_back({k.t, to_vec3(k.translation), to_vec3(k.rotation_deg)});
     handles.push_back(std::move(hs));
   }
   sim::MaterialParams params{o.material.young_modulus, o.material.poisson_ratio, o.material.density,
@@ -150,7 +143,7 @@ SceneObject build_scene_object(const Scene& scene, bool cuttable) {
 
   // Probes must lie in material.
   for (std::size_t i = 0; i < scene.probes.size(); ++i) {
-    if (!model.embed(v3(scene.probes[i].point)))
+    if (!model.embed(to_vec3(scene.probes[i].point)))
       throw SceneError(scene.file + ": /probes/" + std::to_string(i) + "/point: outside the object's material");
   }
   out.model = std::move(model);
@@ -162,7 +155,7 @@ sim::SimulatorOptions simulator_options(const Scene& scene) {
   sim::SimulatorOptions o;
   o.dynamic = s.mode == "dynamic";
   o.dt = s.dt;
-  o.gravity = v3(s.gravity);
+  o.gravity = to_vec3(s.gravity);
   o.linear_solver = s.linear_solver;
   o.tolerance = s.tolerance;
   o.max_iterations = s.max_iterations;

@@ -7,13 +7,12 @@
 #include <stdexcept>
 
 #include "octocut/engine/io/mesh_io.hpp"
+#include "octocut/engine/run/scene_object.hpp"
 #include "octocut/engine/scene/scene_loader.hpp"
 #include "octocut/sim/primitives.hpp"
 
 namespace octocut::engine {
 namespace {
-
-sim::Vec3 to_vec(const std::array<double, 3>& a) { return {a[0], a[1], a[2]}; }
 
 /// Loads a tool's mesh file, turning MeshError into SceneError at `pointer`; what loading repaired goes to `warnings`.
 sim::TriMesh load_tool_file(const Scene& scene, const std::string& path, double scale, bool self_intersections,
@@ -33,7 +32,7 @@ sim::TriMesh load_tool_file(const Scene& scene, const std::string& path, double 
 std::vector<sim::PoseKeyframe> pose_keyframes(const std::vector<PoseKey>& keyframes) {
   std::vector<sim::PoseKeyframe> out;
   out.reserve(keyframes.size());
-  for (const PoseKey& k : keyframes) out.push_back({k.t, to_vec(k.position), to_vec(k.rotation_deg)});
+  for (const PoseKey& k : keyframes) out.push_back({k.t, to_vec3(k.position), to_vec3(k.rotation_deg)});
   return out;
 }
 

@@ -24,7 +24,6 @@ namespace octocut::engine {
 
 namespace {
 
-sim::Vec3 v3(const std::array<double, 3>& a) { return {a[0], a[1], a[2]}; }
 std::array<double, 3> a3(const sim::Vec3& v) { return {v.x(), v.y(), v.z()}; }
 
 std::string format_seconds(double t) {
@@ -201,7 +200,7 @@ void World::Impl::bind_surface() {
   update_surface();
   if (!rendering) return;
   if (!m0.material_graph()) {
-    const sim::Box3 box{v3(scene.object.surface_box.min), v3(scene.object.surface_box.max)};
+    const sim::Box3 box = to_box3(scene.object.surface_box);
     box_tissue = embed_surface(m0, sim::box_face_grids(box, 32));
   }
   camera = make_camera(scene.render.camera, sim::bounds(object.surface));
@@ -305,13 +304,13 @@ void World::Impl::record_state(Report& r) const {
   // Probes, energies and the stability counters of the current state.
   const sim::ObjectModel& m = sim->model();
   for (const Probe& p : scene.probes) {
-    const auto e = m.embed(v3(p.point));
+    const auto e = m.embed(to_vec3(p.point));
     if (!e) {
       r.warnings.push_back("probe " + p.name + ": its point was cut away");
       r.probes.push_back({p.name, p.point, {NAN, NAN, NAN}});
       continue;
     }
-    r.probes.push_back({p.name, p.point, a3(sim->position(*e) - v3(p.point))});
+    r.probes.push_back({p.name, p.point, a3(sim->position(*e) - to_vec3(p.point))});
   }
   r.finite = state_finite(sim->state());
   const sim::StabilityStats& st = sim->stats();

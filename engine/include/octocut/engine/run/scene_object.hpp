@@ -2,6 +2,7 @@
 // What a scene's inputs build before anything runs: the deformable object (model, rest surface S, material graph M),
 // the render props' meshes, the simulator options, the number of steps. Bad input throws SceneError here, before
 // any output is touched.
+#include <array>
 #include <memory>
 #include <string>
 #include <vector>
@@ -39,6 +40,11 @@ struct SceneObject {
   double graph_ms = 0.0;                               ///< time to obtain M, ms
   std::vector<std::string> warnings;                   ///< from loading the mesh and the cache
 };
+
+/// A scene's 3-vector as a sim vector (same units).
+inline sim::Vec3 to_vec3(const std::array<double, 3>& a) { return {a[0], a[1], a[2]}; }
+/// A scene's box as a sim box, m.
+inline sim::Box3 to_box3(const SceneBox& b) { return {to_vec3(b.min), to_vec3(b.max)}; }
 
 /// True when some tool of the scene has cut events on its timeline.
 bool scene_cuts(const Scene& scene);

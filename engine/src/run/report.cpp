@@ -40,6 +40,7 @@ std::string report_json(const Report& r) {
   j["steps"] = r.steps;
   j["sim_time_s"] = num(r.sim_time_s);
   j["wall_time_s"] = r.wall_time_s;
+  j["realtime_factor"] = r.realtime_factor;
   j["timing_ms"] = {{"step", timing(r.step_ms)}, {"render", timing(r.render_ms)}, {"frame_write", timing(r.frame_write_ms)}};
   j["frames"] = {{"rendered", r.frames_rendered}, {"written", r.frames}};
   j["counts"] = {{"elements", r.elements},         {"dofs", r.dofs},
@@ -70,6 +71,7 @@ std::string report_json(const Report& r) {
                          {"elements_after", c.elements_after},
                          {"dofs_after", c.dofs_after},
                          {"surface_vertices_after", c.surface_vertices_after},
+                         {"latency_ms", c.latency_ms},
                          {"ms", ms}});
   }
   nlohmann::ordered_json probes = nlohmann::ordered_json::object();

@@ -79,6 +79,7 @@ struct World::Impl {
   long total_steps = 0;
   long steps = 0;
   std::vector<double> step_ms;
+  std::vector<std::size_t> awaiting_step;  // indices into cuts[] of the cuts whose next step has not run yet
 
   MaterialGraphSource graph_source = MaterialGraphSource::box;
   cutting::CutObject object;                           // S (the one copy), M, the face grid
@@ -251,6 +252,8 @@ CutSummary World::Impl::cut(std::size_t i, double t, bool scheduled) {
   c.surface_vertices_after = long(object.surface.num_vertices());
   c.ms = {o.ms.back_transform, o.ms.surface, o.ms.material_graph, o.ms.refine, o.ms.node_split,
           o.ms.embedding,      o.ms.solver_update, o.ms.total};
+  c.latency_ms = c.ms.back();
+  awaiting_step.push_back(cuts.size());
   cuts.push_back(c);
 
   // What the report should say about it.
@@ -342,8 +345,13 @@ StepResult World::step() {
   const auto t0 = sim::Clock::now();
   StepResult r;
   m->run_due_cuts(r.cuts);
+  const auto sim0 = sim::Clock::now();
   m->sim->step();  // an object cut away entirely only advances time (sim::Simulator::remove_object)
   m->update_surface();
+  // The first step after a cut is part of what the cut costs the user (the solver may rebuild after it).
+  const double sim_ms = sim::ms_since(sim0);
+  for (std::size_t c : m->awaiting_step) m->cuts[c].latency_ms += sim_ms;
+  m->awaiting_step.clear();
   m->run_due_cuts(r.cuts);
   ++m->steps;
   r.t = m->sim->state().t;
@@ -423,6 +431,9 @@ Report World::report() const {
   r.name = m->scene.name;
   r.steps = m->steps;
   r.step_ms = TimingSummary::of(m->step_ms);
+  double stepping_ms = 0.0;
+  for (double ms : m->step_ms) stepping_ms += ms;
+  r.realtime_factor = stepping_ms > 0.0 ? m->sim->state().t / (stepping_ms / 1000.0) : 0.0;
   r.warnings = m->warnings;
   r.cuts = m->cuts;
   r.subsystems.cut_index = m->object.grid.grid != nullptr;

@@ -10,6 +10,7 @@
 #include <fstream>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "common/shapes.hpp"
 #include "common/temp_dir.hpp"
@@ -87,6 +88,32 @@ TEST_F(WorldTest, StepsToTheDurationAndRunsTheTimelinesCutOnTime) {
   EXPECT_EQ(report.subsystems.material_graph, "box");
   EXPECT_FALSE(report.subsystems.renderer);
   EXPECT_FALSE(report.subsystems.contact);
+}
+
+// latency_ms is the cut's total plus the simulation step after it; realtime_factor is simulated time over the wall
+// time of the steps. Both are checked against the step times World returned, which include those parts.
+TEST_F(WorldTest, CutLatencyAndRealtimeFactorAddUpFromTheSteps) {
+  World world(scene(kCube), WorldOptions{.render = false});
+  std::vector<double> step_ms;
+  int cut_step = -1;
+  while (!world.done()) {
+    const StepResult r = world.step();
+    step_ms.push_back(r.ms);
+    if (!r.cuts.empty()) cut_step = int(step_ms.size()) - 1;
+  }
+  ASSERT_EQ(cut_step, 4);
+  const Report report = world.report();
+  ASSERT_EQ(report.cuts.size(), 1u);
+  const CutSummary& c = report.cuts[0];
+  const double total = c.ms.back();
+  // The cut ran after the sim step of step 5; the next step (6) holds the step it waited for, and more.
+  EXPECT_GT(c.latency_ms, total);
+  EXPECT_LE(c.latency_ms - total, step_ms[std::size_t(cut_step) + 1]);
+  EXPECT_LE(total, step_ms[std::size_t(cut_step)]);
+  double sum_ms = 0.0;
+  for (double ms : step_ms) sum_ms += ms;
+  EXPECT_NEAR(report.realtime_factor, world.time() / (sum_ms / 1000.0), 1e-9 * report.realtime_factor);
+  EXPECT_GT(report.realtime_factor, 0.0);
 }
 
 TEST_F(WorldTest, CutNowCutsWhereAPersonHoldsTheTool) {

@@ -36,6 +36,9 @@ struct CutSummary {
   double fragment_volume_m3 = 0.0; ///< their material volume, m^3
   long elements_after = 0, dofs_after = 0, surface_vertices_after = 0;
   std::array<double, 8> ms{};      ///< per kCutStageKeys, ms
+  /// What the user waits for: the cut's total plus the first simulation step after it, ms (the cut alone when the
+  /// run ends before another step).
+  double latency_ms = 0.0;
 };
 
 struct ProbeResult {
@@ -61,6 +64,9 @@ struct Report {
   long steps = 0;
   double sim_time_s = 0.0;
   double wall_time_s = 0.0;
+  /// Simulated time over the wall time of the stepping loop (steps, cuts and, in a run, frames and surface files;
+  /// not the loading before the first step). 1 or more keeps up with the clock; 0 when no step ran.
+  double realtime_factor = 0.0;
   TimingSummary step_ms, render_ms, frame_write_ms;
   long frames_rendered = 0;  ///< frames the renderer drew
   long frames = 0;           ///< frames written to frames/ (PNG)

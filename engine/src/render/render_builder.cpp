@@ -60,18 +60,6 @@ RenderMesh tissue_mesh(const sim::ObjectModel& model, const EmbeddedSurface& sur
   return mesh;
 }
 
-RenderMesh tissue_mesh(const std::vector<sim::Vec3>& positions, const std::vector<sim::Vec3>& normals,
-                       const std::vector<std::array<std::int32_t, 3>>& triangles) {
-  RenderMesh mesh;
-  mesh.material = MaterialKind::tissue;
-  mesh.positions.reserve(positions.size());
-  mesh.normals.reserve(normals.size());
-  for (const sim::Vec3& p : positions) mesh.positions.push_back(to_float(p));
-  for (const sim::Vec3& n : normals) mesh.normals.push_back(to_float(n));
-  mesh.triangles = triangles;
-  return mesh;
-}
-
 Camera make_camera(const CameraSettings& settings, const sim::Box3& bounds) {
   Camera camera;
   const sim::Vec3 centre = 0.5 * (bounds.min + bounds.max);

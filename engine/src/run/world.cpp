@@ -10,6 +10,7 @@
 #include "octocut/cutting/cutting.hpp"
 #include "octocut/cutting/mesh_check.hpp"
 #include "octocut/engine/render/camera.hpp"
+#include "octocut/engine/render/crease.hpp"
 #include "octocut/engine/render/render_builder.hpp"
 #include "octocut/engine/run/scene_object.hpp"
 #include "octocut/engine/run/tool.hpp"
@@ -86,7 +87,11 @@ struct World::Impl {
   std::unique_ptr<sim::Simulator> sim;                 // model revision and state
   std::unique_ptr<sim::SurfaceEmbedding> embedding;    // S bound to the current model
   sim::Executor surface_exec;                          // deformed positions and normals, parallel over vertices
-  std::vector<sim::Vec3> deformed, deformed_normals;   // S after the last step (|V|, m; unit)
+  std::vector<sim::Vec3> deformed;                     // S after the last step (|V|, m)
+  long surface_revision = 0;                           // counts the changes of S (cuts)
+  // The tissue's smooth patches for drawing, made when a frame first needs them after S changed.
+  mutable CreaseTopology crease;
+  mutable long crease_revision = -1;
 
   std::vector<ToolRuntime> tools;
   std::vector<PropRuntime> props;
@@ -210,11 +215,9 @@ void World::Impl::bind_surface() {
 void World::Impl::update_surface() {
   if (sim->empty()) {
     deformed.clear();
-    deformed_normals.clear();
     return;
   }
   embedding->deformed_positions(sim->state().x, deformed, surface_exec);
-  embedding->deformed_normals(object.surface, deformed, deformed_normals, surface_exec);
 }
 
 sim::Pose World::Impl::tool_pose(std::size_t i, double t) const {
@@ -264,7 +267,10 @@ CutSummary World::Impl::cut(std::size_t i, double t, bool scheduled) {
   if (o.unrestricted > 0)
     warnings.push_back(what + ": the blade also covered other material in rest space, and could not be kept off it (" +
                        std::to_string(o.unrestricted) + " component(s)): it cut all of it");
-  if (o.status == "ok") update_surface();
+  if (o.status == "ok") {
+    ++surface_revision;
+    update_surface();
+  }
   return c;
 }
 
@@ -400,9 +406,11 @@ RenderScene World::render_scene() const {
     rs.meshes.push_back(tissue_mesh(model, m->box_tissue, slots));
   } else {
     // The mesh surface S as the Z-curve embedding moved it after the last step, cut faces tinted.
-    RenderMesh tissue = tissue_mesh(m->deformed, m->deformed_normals, m->object.surface.triangles);
-    tissue.cut.assign(m->object.cut_faces.begin(), m->object.cut_faces.end());
-    rs.meshes.push_back(std::move(tissue));
+    if (m->crease_revision != m->surface_revision) {
+      m->crease = crease_topology(m->object.surface, m->object.cut_faces, scene.render.crease_angle_deg);
+      m->crease_revision = m->surface_revision;
+    }
+    rs.meshes.push_back(crease_mesh(m->crease, m->deformed, m->object.cut_faces));
   }
   // Props and tools at their pose now; the camera follows the one it is told to.
   for (std::size_t i = 0; i < m->props.size(); ++i) {

@@ -485,6 +485,7 @@ RenderSettings to_render(const json& render, const std::vector<ToolSettings>& to
   r.height = render["height"].get<int>();
   r.every = render["every"].get<int>();
   r.msaa = render["msaa"].get<int>();
+  r.crease_angle_deg = render["crease_angle_deg"].get<double>();
   r.camera = to_camera(render["camera"], file);
   r.props = to_props(render["props"], file);
   const std::string& follow = r.camera.follow_tool;

@@ -304,6 +304,9 @@ Entry make_scene_schema() {
           integer("height", 720, closed(16, 8192), "Image height, pixels."),
           integer("every", 1, closed(1, max_int), "Render one frame every N steps (frame k after step k * N)."),
           integer("msaa", 4, closed(0, 16), "Multisample anti-aliasing samples per pixel; 0 or 1: off."),
+          number("crease_angle_deg", 40.0, closed(0, 180),
+                 "Tissue shading: an edge whose faces' rest normals differ by more than this is a crease, and the "
+                 "normals are not averaged across it, degrees. A cut face never shares a normal with an uncut one."),
           object("camera",
                  {std::move(position), std::move(target),
                   vec3("up", std::array{0.0, 0.0, 1.0}, "Approximate up direction; not parallel to the view."),

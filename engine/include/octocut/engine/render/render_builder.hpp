@@ -26,11 +26,6 @@ EmbeddedSurface embed_surface(const sim::ObjectModel& model, sim::TriMesh rest);
 RenderMesh tissue_mesh(const sim::ObjectModel& model, const EmbeddedSurface& surface,
                        const std::vector<sim::Vec3>& slots);
 
-/// The deformed tissue of a mesh surface: positions and unit normals (|V|, m) from the surface embedding, and the
-/// surface's triangles; no cut faces yet.
-RenderMesh tissue_mesh(const std::vector<sim::Vec3>& positions, const std::vector<sim::Vec3>& normals,
-                       const std::vector<std::array<std::int32_t, 3>>& triangles);
-
 /// The pose of a render prop at time t (s), as a model-to-world transform (m): sim::interpolate_pose of its
 /// keyframes (position linear, rotation slerp, held at both ends); the identity without keyframes.
 Eigen::Matrix4d prop_pose(const RenderProp& prop, double t);

@@ -132,6 +132,7 @@ struct RenderSettings {
   int height = 720;   ///< pixels
   int every = 1;      ///< render one frame every N steps
   int msaa = 4;       ///< samples per pixel; 0 or 1: off
+  double crease_angle_deg = 40.0;  ///< tissue normals are not averaged across sharper edges, degrees
   CameraSettings camera;
   OverlaySettings overlays;
   std::vector<RenderProp> props;  ///< render-only meshes

@@ -373,6 +373,150 @@ std::vector<BenchOutput> bench_cut(const std::string& scene_name) {
   return {b};
 }
 
+// ---- step/<scene>, scaling, latency/<scene>: the shipped scenes at their own settings (real-time issue) ----------
+
+// One run of a scene through World without rendering: every step's wall time and profile, PCG iterations and
+// refactorisations, and the DOF positions after every step (for the error against an exact run of the same model).
+struct SceneStepRun {
+  std::vector<double> step_ms;
+  std::vector<sim::StepProfile> profile;
+  std::vector<std::vector<sim::Vec3>> x;  // DOF positions after each step (steps x num_dofs, m)
+  std::vector<sim::Vec3> x0;              // DOF positions at rest (num_dofs, m)
+  long iterations = 0, refactorizations = 0, elements = 0, dofs = 0;
+  std::vector<CutSummary> cuts;
+  double sim_time_s = 0.0, wall_ms = 0.0;
+};
+
+SceneStepRun run_scene_steps(const Scene& scene, bool keep_positions) {
+  World world(scene, WorldOptions{false});
+  SceneStepRun r;
+  r.x0 = world.simulator().state().x;
+  r.elements = world.simulator().model().num_elements();
+  r.dofs = world.simulator().model().num_dofs();
+  const auto t0 = Clock::now();
+  while (!world.done()) {
+    StepResult step = world.step();
+    r.step_ms.push_back(step.ms);
+    r.profile.push_back(world.simulator().profile());
+    r.iterations += world.simulator().last_solve().iterations;
+    r.refactorizations += world.simulator().last_solve().refactorized ? 1 : 0;
+    if (keep_positions) r.x.push_back(world.simulator().state().x);
+    r.cuts.insert(r.cuts.end(), step.cuts.begin(), step.cuts.end());
+  }
+  r.wall_ms = sim::ms_since(t0);
+  r.sim_time_s = world.time();
+  return r;
+}
+
+// The largest DOF deviation of `run` from `exact` over all steps, over the largest exact displacement.
+double rel_error(const SceneStepRun& run, const SceneStepRun& exact) {
+  double dev = 0.0, ref = 0.0;
+  for (std::size_t i = 0; i < exact.x.size() && i < run.x.size(); ++i)
+    for (std::size_t d = 0; d < exact.x[i].size() && d < run.x[i].size() && d < exact.x0.size(); ++d) {
+      dev = std::max(dev, (run.x[i][d] - exact.x[i][d]).norm());
+      ref = std::max(ref, (exact.x[i][d] - exact.x0[d]).norm());
+    }
+  return ref > 0.0 ? dev / ref : 0.0;
+}
+
+// Step time of a shipped scene at its own settings (sets: scene overrides, e.g. a finer base level), with the error
+// against the same scene solved exactly (CHOLMOD every step) and where the time goes.
+std::vector<BenchOutput> bench_scene_step(const std::string& name, const std::string& scene_name,
+                                          const std::vector<std::string>& sets) {
+  const std::string file = asset_path("scenes/" + scene_name + ".json");
+  const Scene scene = load_scene(file, sets);
+  const SceneStepRun run = run_scene_steps(scene, true);
+  std::vector<std::string> exact_sets = sets;
+  exact_sets.push_back("/solver/linear_solver=cholmod");
+  const SceneStepRun exact = run_scene_steps(load_scene(file, exact_sets), true);
+  BenchOutput b;
+  b.name = name;
+  // The first steps include the symbolic analysis and the first factorisation: report steady state.
+  const std::size_t skip = std::min<std::size_t>(10, run.step_ms.size() / 10);
+  const std::vector<double> steady(run.step_ms.begin() + long(skip), run.step_ms.end());
+  b.runs = long(steady.size());
+  b.ms = TimingSummary::of(steady);
+  b.params = {{"scene", "assets/scenes/" + scene_name + ".json"}, {"sets", sets}, {"dt_s", scene.solver.dt},
+              {"linear_solver", scene.solver.linear_solver}, {"tolerance", scene.solver.tolerance},
+              {"steps", run.step_ms.size()}, {"threads", int(std::thread::hardware_concurrency())}};
+  std::vector<double> rot, frc, asmb, slv;
+  for (std::size_t i = skip; i < run.profile.size(); ++i) {
+    rot.push_back(run.profile[i].rotations);
+    frc.push_back(run.profile[i].forces);
+    asmb.push_back(run.profile[i].assembly);
+    slv.push_back(run.profile[i].solve);
+  }
+  const double steps = double(std::max<std::size_t>(1, run.step_ms.size()));
+  b.metrics = {{"elements", run.elements},
+               {"dofs", run.dofs},
+               {"rel_error_vs_exact", rel_error(run, exact)},
+               {"p95_over_median", b.ms.median > 0 ? b.ms.p95 / b.ms.median : 0.0},
+               {"rotations_ms", median_of(rot)},
+               {"forces_ms", median_of(frc)},
+               {"assembly_ms", median_of(asmb)},
+               {"solve_ms", median_of(slv)},
+               {"mean_pcg_iterations", double(run.iterations) / steps},
+               {"refactorizations", run.refactorizations},
+               {"realtime_factor", run.wall_ms > 0 ? run.sim_time_s / (run.wall_ms / 1000.0) : 0.0}};
+  return {b};
+}
+
+// Step time against elements: a soft cube (E = 5e4 Pa, nu = 0.45, 1 mm leaves, bottom clamped, gravity, dt = 1 ms,
+// the step benchmark's tolerance 1e-4) from 10^3 to 31^3 leaves, 40 steps each after 5 to warm up.
+std::vector<BenchOutput> bench_scaling() {
+  std::vector<BenchOutput> out;
+  for (const int n : {10, 14, 18, 22, 26, 31}) {
+    const double h = 0.001, edge = n * h;
+    char text[1024];
+    std::snprintf(text, sizeof(text), R"({"name": "scaling %d", "duration": 0.045,
+      "solver": {"dt": 0.001, "linear_solver": "pcg", "tolerance": 1e-4},
+      "object": {"surface": {"box": {"min": [0, 0, 0], "max": [%.6f, %.6f, %.6f]}},
+                 "material": {"young_modulus": 5e4, "poisson_ratio": 0.45, "density": 1000},
+                 "octree": {"root": {"min": [0, 0, 0], "size": 0.032}, "base_level": 5, "max_level": 5},
+                 "handles": [{"box": {"min": [-1, -1, -1], "max": [1, 1, 1e-9]}}]}})",
+                  n, edge, edge, edge);
+    const std::filesystem::path dir = std::filesystem::temp_directory_path() / "octocut_bench_scaling";
+    std::filesystem::create_directories(dir);
+    const std::filesystem::path file = dir / ("cube" + std::to_string(n) + ".json");
+    { std::ofstream(file) << text; }
+    const SceneStepRun run = run_scene_steps(load_scene(file.string()), false);
+    std::filesystem::remove(file);
+    BenchOutput b;
+    b.name = "scaling/cube" + std::to_string(n);
+    const std::vector<double> steady(run.step_ms.begin() + 5, run.step_ms.end());
+    b.runs = long(steady.size());
+    b.ms = TimingSummary::of(steady);
+    b.params = {{"leaves", std::to_string(n) + "^3"}, {"leaf_m", h}, {"young_modulus_pa", 5e4}, {"poisson_ratio", 0.45},
+                {"dt_s", 1e-3}, {"tolerance", 1e-4}, {"threads", int(std::thread::hardware_concurrency())}};
+    b.metrics = {{"elements", run.elements}, {"dofs", run.dofs},
+                 {"ms_per_element_us", 1000.0 * b.ms.median / double(std::max(1L, run.elements))},
+                 {"mean_pcg_iterations", double(run.iterations) / double(std::max<std::size_t>(1, run.step_ms.size()))},
+                 {"refactorizations", run.refactorizations}};
+    out.push_back(std::move(b));
+  }
+  return out;
+}
+
+// What a cut costs the user in a shipped scene: cuts[].latency_ms (the cut plus the first step after it), and the
+// longest step after a cut against the median step.
+std::vector<BenchOutput> bench_latency(const std::string& scene_name) {
+  const std::string file = asset_path("scenes/" + scene_name + ".json");
+  const SceneStepRun run = run_scene_steps(load_scene(file), false);
+  std::vector<double> latency;
+  for (const CutSummary& c : run.cuts) latency.push_back(c.latency_ms);
+  BenchOutput b;
+  b.name = "latency/" + scene_name;
+  b.runs = long(latency.size());
+  b.ms = TimingSummary::of(latency);
+  const TimingSummary steps = TimingSummary::of(run.step_ms);
+  b.params = {{"scene", "assets/scenes/" + scene_name + ".json"}, {"cuts", run.cuts.size()},
+              {"threads", int(std::thread::hardware_concurrency())}};
+  b.metrics = {{"latency_median_ms", b.ms.median}, {"latency_p95_ms", b.ms.p95}, {"step_median_ms", steps.median},
+               {"step_max_ms", steps.max}, {"elements", run.elements}, {"dofs", run.dofs},
+               {"realtime_factor", run.wall_ms > 0 ? run.sim_time_s / (run.wall_ms / 1000.0) : 0.0}};
+  return {b};
+}
+
 struct Entry {
   std::string name;
   std::function<std::vector<BenchOutput>()> run;
@@ -393,7 +537,13 @@ std::vector<Entry> registry() {
           {"cut/meniscus_punch", [] { return bench_cut("meniscus_punch"); }},
           {"cut/meniscus_punch_hd", [] { return bench_cut("meniscus_punch_hd"); }},
           {"cut/adaptive_cut", [] { return bench_cut("adaptive_cut"); }},
-          {"cut/uniform_cut", [] { return bench_cut("uniform_cut"); }}};
+          {"cut/uniform_cut", [] { return bench_cut("uniform_cut"); }},
+          {"step/meniscus_rest", [] { return bench_scene_step("step/meniscus_rest", "meniscus_rest", {}); }},
+          {"step/meniscus_l6",
+           [] { return bench_scene_step("step/meniscus_l6", "meniscus_rest", {"/object/octree/base_level=6"}); }},
+          {"scaling", [] { return bench_scaling(); }},
+          {"latency/meniscus_punch", [] { return bench_latency("meniscus_punch"); }},
+          {"latency/meniscus_punch_hd", [] { return bench_latency("meniscus_punch_hd"); }}};
 }
 
 std::string cpu_name() {

@@ -231,6 +231,7 @@ int main(int argc, char** argv) {
   cut->add_option("--cell-size", cut_opts.cell_size, "Material graph cell size, m (default 1 mm)");
   bool no_verify = false;
   cut->add_flag("--no-verify", no_verify, "Skip the local check of the result");
+  cut->add_flag("--ply-float", cut_opts.ply_float, "Write a .ply output in float32 (default float64, exact)");
 
   auto* scene_doc = app.add_subcommand("scene-doc", "Print the scene-format documentation generated from the schema");
 

@@ -2,6 +2,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
+#include <cstdlib>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -115,6 +117,48 @@ TEST_F(CutCli, BadBladesExitTwoAndWriteNothing) {
     EXPECT_FALSE(fs::exists(dir / "out.off")) << bad;
     EXPECT_FALSE(fs::exists(dir / "cut.json")) << bad;
   }
+}
+
+}  // namespace
+}  // namespace octocut
+
+namespace octocut {
+namespace {
+
+// A cut result written as PLY reads back as the same surface, bit for bit: its volume, summed over the same triangles
+// in the same order from the coordinates read back, equals the report's output volume exactly (JSON numbers are
+// written with round-trip precision). Float PLY (--ply-float) does not. OBJ coordinates are round-trip decimals.
+TEST_F(CutCli, CutResultsReadBackBitForBit) {
+  for (const char* out : {"out.ply", "out_float.ply", "out.obj"}) {
+    const std::string flags = std::string(out) == "out_float.ply" ? " --ply-float" : "";
+    const auto r = test::run_octocut("cut --surface " + p("cube.off") + " --blade " + p("punch.off") + " --out " +
+                                     p(out) + " --scale 0.001 --report " + p("cut.json") + flags);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+  }
+  const nlohmann::json j = report("cut.json");
+  const double volume = j["output_volume_m3"].get<double>();
+  const sim::TriMesh exact = engine::load_mesh(dir / "out.ply").mesh;
+  EXPECT_EQ(long(exact.num_vertices()), j["output_vertices"].get<long>());
+  EXPECT_EQ(long(exact.num_triangles()), j["output_triangles"].get<long>());
+  EXPECT_EQ(sim::signed_volume(exact), volume);
+  const sim::TriMesh single = engine::load_mesh(dir / "out_float.ply").mesh;
+  EXPECT_EQ(single.num_triangles(), exact.num_triangles());
+  EXPECT_NE(sim::signed_volume(single), volume);
+  EXPECT_NEAR(sim::signed_volume(single), volume, 1e-6 * volume);
+  // The OBJ's "v" lines parse to exactly the PLY's vertices (as sorted sets of points).
+  std::ifstream obj(dir / "out.obj");
+  std::vector<std::array<double, 3>> from_obj, from_ply;
+  for (std::string line; std::getline(obj, line);) {
+    if (line.rfind("v ", 0) != 0) continue;
+    std::array<double, 3> v{};
+    char* end = line.data() + 2;
+    for (double& c : v) c = std::strtod(end, &end);
+    from_obj.push_back(v);
+  }
+  for (const Vec3& v : exact.vertices) from_ply.push_back({v.x(), v.y(), v.z()});
+  std::sort(from_obj.begin(), from_obj.end());
+  std::sort(from_ply.begin(), from_ply.end());
+  EXPECT_EQ(from_obj, from_ply);
 }
 
 }  // namespace

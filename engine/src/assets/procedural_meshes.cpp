@@ -531,10 +531,11 @@ std::vector<AssetInfo> write_assets(const std::filesystem::path& dir) {
   meshes.emplace_back("blade_cyl20mm.ply", make_cylinder(20.0, 60.0, 64));
   meshes.emplace_back("femur_condyle.ply", make_femoral_condyle(meniscus));
   meshes.emplace_back("tibia_plateau.ply", make_tibial_plateau(meniscus));
-  // Encode and write each file atomically.
+  // Encode and write each file atomically, in float32: the committed assets were made so, and every shipped scene's
+  // material graph cache and expected block depends on their exact bytes.
   std::vector<AssetInfo> infos;
   for (const auto& [name, mesh] : meshes) {
-    engine::write_file_atomic(dir / name, engine::encode_ply_binary(mesh));
+    engine::write_file_atomic(dir / name, engine::encode_ply_binary(mesh, engine::PlyPrecision::single));
     infos.push_back({name, mesh.num_vertices(), mesh.num_triangles(), sim::signed_volume(mesh)});
   }
   return infos;

@@ -25,6 +25,7 @@
 #include "octocut/engine/io/io.hpp"
 #include "octocut/engine/io/mesh_io.hpp"
 #include "octocut/sim/surface_check.hpp"
+#include "io/mesh_ply.hpp"
 
 namespace octocut::engine {
 namespace {
@@ -242,6 +243,17 @@ std::string encode_off(const sim::TriMesh& mesh) {
   return out;
 }
 
+/// An OBJ file (vertices and triangles, 1-based) with shortest round-trip decimal coordinates: assimp's exporter
+/// writes 32-bit floats.
+std::string encode_obj(const sim::TriMesh& mesh) {
+  std::string out = "# octocut\n";
+  for (const sim::Vec3& p : mesh.vertices)
+    out += "v " + format_number(p.x()) + " " + format_number(p.y()) + " " + format_number(p.z()) + "\n";
+  for (const auto& t : mesh.triangles)
+    out += "f " + std::to_string(t[0] + 1) + " " + std::to_string(t[1] + 1) + " " + std::to_string(t[2] + 1) + "\n";
+  return out;
+}
+
 /// A one-mesh, one-material assimp scene holding `mesh` (single precision, as assimp stores it).
 std::unique_ptr<aiScene> to_assimp_scene(const sim::TriMesh& mesh) {
   auto scene = std::make_unique<aiScene>();
@@ -425,6 +437,9 @@ std::vector<std::string> validate_mesh(sim::TriMesh& mesh, const std::string& fi
   return warnings;
 }
 
+void read_with_assimp(const fs::path& path, const std::string& file, std::vector<sim::Vec3>& positions,
+                      std::vector<std::array<int64_t, 3>>& triangles);
+
 LoadedMesh load_mesh(const fs::path& path, const MeshLoadOptions& options) {
   const std::string file = path.string();
   if (!std::isfinite(options.scale) || options.scale <= 0.0) {
@@ -440,19 +455,17 @@ LoadedMesh load_mesh(const fs::path& path, const MeshLoadOptions& options) {
   if (ec) throw MeshError(file + ": cannot read: " + ec.message());
   if (size == 0) throw MeshError(file + ": empty file");
 
-  // Let assimp parse and triangulate; welding and validation are ours.
-  Assimp::Importer importer;
-  const CaptureImportErrors errors;
-  const aiScene* scene = importer.ReadFile(file, aiProcess_Triangulate | aiProcess_ValidateDataStructure);
-  if (scene == nullptr) {
-    throw MeshError(file + ": cannot read mesh (unknown format or corrupt file): " + importer.GetErrorString());
-  }
-  if (!errors.first().empty()) throw MeshError(file + ": malformed mesh: " + errors.first());
-
-  // Merge every mesh of the node tree, apply the scale, weld.
+  // PLY with our own reader (double precision); the rest: assimp parses and triangulates. Welding and validation are
+  // ours.
   std::vector<sim::Vec3> positions;
   std::vector<std::array<int64_t, 3>> triangles;
-  gather_triangles(*scene, file, positions, triangles);
+  if (lower_extension(path) == ".ply") {
+    PlyContents ply = decode_ply(read_file(path), file);
+    positions = std::move(ply.positions);
+    triangles = std::move(ply.triangles);
+  } else {
+    read_with_assimp(path, file, positions, triangles);
+  }
   if (triangles.empty()) throw MeshError(file + ": no triangles in the file");
   if (positions.size() > static_cast<std::size_t>(INT32_MAX)) throw MeshError(file + ": too many vertices");
   for (sim::Vec3& p : positions) p *= options.scale;
@@ -462,7 +475,21 @@ LoadedMesh load_mesh(const fs::path& path, const MeshLoadOptions& options) {
   return loaded;
 }
 
-void save_mesh(const fs::path& path, const sim::TriMesh& mesh) {
+void read_with_assimp(const fs::path& path, const std::string& file, std::vector<sim::Vec3>& positions,
+                      std::vector<std::array<int64_t, 3>>& triangles) {
+  Assimp::Importer importer;
+  const CaptureImportErrors errors;
+  const aiScene* scene = importer.ReadFile(file, aiProcess_Triangulate | aiProcess_ValidateDataStructure);
+  if (scene == nullptr) {
+    throw MeshError(file + ": cannot read mesh (unknown format or corrupt file): " + importer.GetErrorString());
+  }
+  if (!errors.first().empty()) throw MeshError(file + ": malformed mesh: " + errors.first());
+
+  // Merge every mesh of the node tree.
+  gather_triangles(*scene, file, positions, triangles);
+}
+
+void save_mesh(const fs::path& path, const sim::TriMesh& mesh, PlyPrecision ply) {
   const std::string file = path.string();
 
   // Refuse meshes whose indices would make a broken file.
@@ -480,11 +507,11 @@ void save_mesh(const fs::path& path, const sim::TriMesh& mesh) {
   const std::string ext = lower_extension(path);
   std::string bytes;
   if (ext == ".ply") {
-    bytes = encode_ply_binary(mesh);
+    bytes = encode_ply_binary(mesh, ply);
   } else if (ext == ".off") {
     bytes = encode_off(mesh);
   } else if (ext == ".obj") {
-    bytes = export_with_assimp(path, mesh, "objnomtl");
+    bytes = encode_obj(mesh);
   } else if (ext == ".stl") {
     bytes = export_with_assimp(path, mesh, "stlb");
   } else if (ext == ".gltf") {

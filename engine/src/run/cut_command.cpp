@@ -98,7 +98,7 @@ CutCommandResult run_cut_command(const CutCommandOptions& o) {
   j["material_graph"] = {{"cell_size_m", h}, {"tets", tets}, {"tets_removed", tets_removed}};
   j["ms"] = {{"surface", ms_surface}, {"material_graph", ms_graph}, {"total", ms_total}};
   try {
-    if (ok || noop) save_mesh(o.out_path, result);
+    if (ok || noop) save_mesh(o.out_path, result, o.ply_float ? PlyPrecision::single : PlyPrecision::double_);
     if (!o.report_path.empty()) write_file_atomic(o.report_path, j.dump(2) + "\n");
   } catch (const std::exception& e) {
     return {1, e.what()};

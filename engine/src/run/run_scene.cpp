@@ -74,7 +74,7 @@ class Run {
       if (scene.output.surface_every > 0 && i % scene.output.surface_every == 0) {
         char name[32];
         std::snprintf(name, sizeof(name), "surface_%06ld.ply", i);
-        write_file_atomic(m_out / "surfaces" / name, encode_ply_binary(m_world.deformed_surface()));
+        write_file_atomic(m_out / "surfaces" / name, encode_ply_binary(m_world.deformed_surface(), ply_precision()));
       }
       if (m_renderer && i % scene.render.every == 0) render_frame();
       if (tty && (sim::ms_since(last_progress) > 200.0 || m_world.done())) {
@@ -84,8 +84,8 @@ class Run {
     }
     if (!state_finite(m_world.simulator().state())) throw std::runtime_error("the state is not finite");
     if (scene.output.surface_final) {
-      write_file_atomic(m_out / "surface_final.ply", encode_ply_binary(m_world.deformed_surface()));
-      write_file_atomic(m_out / "surface_rest_final.ply", encode_ply_binary(m_world.rest_surface()));
+      write_file_atomic(m_out / "surface_final.ply", encode_ply_binary(m_world.deformed_surface(), ply_precision()));
+      write_file_atomic(m_out / "surface_rest_final.ply", encode_ply_binary(m_world.rest_surface(), ply_precision()));
     }
     // Every queued frame is on disk before the run counts as done.
     if (m_writer) m_writer->finish();
@@ -119,11 +119,15 @@ class Run {
   }
 
  private:
+  [[nodiscard]] PlyPrecision ply_precision() const {
+    return m_world.scene().output.ply_float ? PlyPrecision::single : PlyPrecision::double_;
+  }
+
   // The files written before the first step: S at rest, the surfaces folder, the frame writer.
   void open_outputs() {
     const Scene& scene = m_world.scene();
     if (scene.output.surface_final || scene.output.surface_every > 0)
-      write_file_atomic(m_out / "surface_rest.ply", encode_ply_binary(m_world.rest_surface()));
+      write_file_atomic(m_out / "surface_rest.ply", encode_ply_binary(m_world.rest_surface(), ply_precision()));
     if (scene.output.surface_every > 0) fs::create_directories(m_out / "surfaces");
     if (scene.output.frames && m_options.no_render)
       m_warnings.push_back("/output/frames: --no-render given, no frames written");

@@ -521,6 +521,7 @@ Scene to_scene(const json& document, const std::string& file) {
   scene.output.frames = document["output"]["frames"].get<bool>();
   scene.output.surface_final = document["output"]["surface_final"].get<bool>();
   scene.output.surface_every = document["output"]["surface_every"].get<int>();
+  scene.output.ply_float = document["output"]["ply_precision"].get<std::string>() == "float";
   // The expected block stays JSON text (validated by the schema); see expected.hpp.
   if (document.contains("expected")) scene.expected_json = document["expected"].dump();
   return scene;

@@ -360,7 +360,10 @@ Entry make_scene_schema() {
                                     "on which cuts show as holes) and the final deformed surface (`surface_final.ply`)."),
                             integer("surface_every", 0, closed(0, max_int),
                                     "Write the deformed surface every N steps as `surfaces/surface_<step>.ply` "
-                                    "(6 digits, binary PLY, metres), and the rest surface once; 0: never.")},
+                                    "(6 digits, binary PLY, metres), and the rest surface once; 0: never."),
+                            choice("ply_precision", {"double", "float"}, "double",
+                                   "Coordinates of the PLY files written: `double` (a surface read back is the surface "
+                                   "written, bit for bit) or `float` (half the size, for renderers).")},
                            "Files the run writes besides the report."),
                     std::move(expected),
                 },

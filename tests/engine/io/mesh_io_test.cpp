@@ -9,7 +9,11 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <Eigen/Geometry>
+#include <cstdint>
 #include <limits>
+#include <numbers>
+#include <utility>
 #include <random>
 #include <string>
 #include <vector>
@@ -177,6 +181,101 @@ TEST_F(MeshIoTest, ReadsInlineAsciiPly) {
   const LoadedMesh loaded = load_mesh(write("tetra.ply", ply));
   EXPECT_EQ(loaded.mesh.num_vertices(), 4u);
   EXPECT_NEAR(sim::signed_volume(loaded.mesh), 8.0 / 6.0, 1e-12);
+}
+
+// A unit cube as 6 quads in ASCII PLY, with an extra per-vertex property and an edge element to read past: the
+// quads fan into 12 triangles enclosing volume 1.
+TEST_F(MeshIoTest, AsciiPlyQuadsAndExtraPropertiesAndElements) {
+  const std::string ply =
+      "ply\r\nformat ascii 1.0\r\nobj_info made by hand\r\n"
+      "element vertex 8\nproperty double x\nproperty uchar red\nproperty double y\nproperty double z\n"
+      "element face 6\nproperty uchar flags\nproperty list uchar uint vertex_index\n"
+      "element edge 1\nproperty int vertex1\nproperty int vertex2\nend_header\n"
+      "0 9 0 0\n1 9 0 0\n1 9 1 0\n0 9 1 0\n0 9 0 1\n1 9 0 1\n1 9 1 1\n0 9 1 1\n\n"
+      "7 4 0 3 2 1\n7 4 4 5 6 7\n7 4 0 1 5 4\n7 4 1 2 6 5\n7 4 2 3 7 6\n7 4 3 0 4 7\n"
+      "0 1\n";
+  const LoadedMesh loaded = load_mesh(write("cube.ply", ply));
+  EXPECT_EQ(loaded.mesh.num_vertices(), 8u);
+  EXPECT_EQ(loaded.mesh.num_triangles(), 12u);
+  EXPECT_DOUBLE_EQ(sim::signed_volume(loaded.mesh), 1.0);
+}
+
+// Big-endian binary with double coordinates and short indices: the bytes are built by hand here.
+TEST_F(MeshIoTest, BigEndianBinaryPlyReadsExactDoubles) {
+  const sim::TriMesh tetra{{sim::Vec3(0.1, 0.2, 0.3), sim::Vec3(2.0 / 3.0, 0.2, 0.3), sim::Vec3(0.1, std::sqrt(2.0), 0.3),
+                            sim::Vec3(0.1, 0.2, std::numbers::pi)},
+                           {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}}};
+  std::string bytes = "ply\nformat binary_big_endian 1.0\nelement vertex 4\nproperty float64 x\nproperty float64 y\n"
+                      "property float64 z\nelement face 4\nproperty list uint8 int16 vertex_indices\nend_header\n";
+  auto big = [&](const void* p, std::size_t n) {
+    const auto* c = static_cast<const char*>(p);
+    for (std::size_t i = n; i-- > 0;) bytes += c[i];
+  };
+  for (const sim::Vec3& v : tetra.vertices)
+    for (int k = 0; k < 3; ++k) big(&v[k], 8);
+  for (const auto& t : tetra.triangles) {
+    bytes += char(3);
+    for (int32_t v : t) {
+      const auto s = std::int16_t(v);
+      big(&s, 2);
+    }
+  }
+  const LoadedMesh loaded = load_mesh(write("tetra.ply", bytes));
+  ASSERT_EQ(loaded.mesh.num_vertices(), 4u);
+  EXPECT_EQ(sim::signed_volume(loaded.mesh), sim::signed_volume(tetra));  // the same doubles, bit for bit
+}
+
+// Written as double PLY (the default) a mesh of awkward coordinates reads back bit for bit; as float PLY it does not.
+TEST_F(MeshIoTest, DoublePlyRoundTripsBitForBit) {
+  sim::TriMesh cube = grid_cube(3, 0.1);
+  const Eigen::Matrix3d rot = Eigen::AngleAxisd(0.3, sim::Vec3(1, 1, 2).normalized()).toRotationMatrix();
+  for (sim::Vec3& v : cube.vertices) v = rot * v + sim::Vec3(1.0 / 3.0, 1e-7, 0.0);
+  save_mesh(m_dir / "exact.ply", cube);
+  save_mesh(m_dir / "single.ply", cube, PlyPrecision::single);
+  const sim::TriMesh exact = load_mesh(m_dir / "exact.ply").mesh;
+  ASSERT_EQ(exact.triangles.size(), cube.triangles.size());
+  for (std::size_t f = 0; f < cube.triangles.size(); ++f)
+    for (int k = 0; k < 3; ++k)
+      EXPECT_EQ(exact.vertices[std::size_t(exact.triangles[f][std::size_t(k)])], cube.vertices[std::size_t(cube.triangles[f][std::size_t(k)])]);
+  const sim::TriMesh single = load_mesh(m_dir / "single.ply").mesh;
+  EXPECT_NE(sim::signed_volume(single), sim::signed_volume(cube));
+  EXPECT_LT(fs::file_size(m_dir / "single.ply"), fs::file_size(m_dir / "exact.ply"));
+}
+
+// Hostile PLY files are errors that name the file and what is wrong, never crashes or huge allocations.
+TEST_F(MeshIoTest, HostilePlyFilesAreClearErrors) {
+  const std::string header = "ply\nformat binary_little_endian 1.0\n";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n", "end_header"},
+      {header + "element vertex 99999999999999\nproperty float x\nproperty float y\nproperty float z\nend_header\n",
+       "more than the file holds"},
+      {"ply\nformat ascii 2.0\nend_header\n", "version"},
+      {"ply\nformat ascii 1.0\nelement vertex 1\nproperty quad x\nend_header\n", "unknown property type"},
+      {"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+       "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n",
+       "refers to vertex 7"},
+      {"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+       "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 1e300\n",
+       "not a 32-bit integer"},
+      {"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+       "0 0 0\n1 zero 0\n",
+       "line 9"},
+      {header + "element vertex 1\nproperty double x\nproperty double y\nproperty double z\nend_header\nshort",
+       "file ends inside vertex 0"},
+      {"ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n3 0 1 2\n",
+       "no vertex element"},
+  };
+  for (std::size_t i = 0; i < cases.size(); ++i) {
+    const fs::path file = write("bad" + std::to_string(i) + ".ply", cases[i].first);
+    try {
+      load_mesh(file);
+      ADD_FAILURE() << "case " << i << " loaded";
+    } catch (const MeshError& e) {
+      const std::string what = e.what();
+      EXPECT_EQ(what.rfind(file.string(), 0), 0u) << what;
+      EXPECT_NE(what.find(cases[i].second), std::string::npos) << "case " << i << ": " << what;
+    }
+  }
 }
 
 TEST_F(MeshIoTest, ReadsInlineAsciiStlAndWeldsItsCorners) {

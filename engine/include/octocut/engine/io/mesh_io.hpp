@@ -16,6 +16,10 @@ class MeshError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// Coordinates of a written PLY file: double (the default: a surface read back is the surface written, bit for bit)
+/// or single (float32, half the size, for renderers and viewers that want it).
+enum class PlyPrecision { double_, single };
+
 /// How a mesh file is loaded.
 struct MeshLoadOptions {
   double scale = 1.0;             ///< multiplies file coordinates to get metres
@@ -29,12 +33,16 @@ struct LoadedMesh {
   std::vector<std::string> warnings;  ///< for example "reoriented a consistently inverted mesh"
 };
 
-/// Loads OBJ, PLY (ASCII and binary), STL (ASCII and binary), OFF, glTF and GLB. Throws MeshError.
+/// Loads OBJ, PLY (ASCII and binary), STL (ASCII and binary), OFF, glTF and GLB. Throws MeshError. PLY is read by
+/// octocut's own reader in double precision (a double PLY reads back bit for bit); the other formats through assimp,
+/// whose coordinates are 32-bit floats.
 LoadedMesh load_mesh(const std::filesystem::path& path, const MeshLoadOptions& options = {});
 
-/// Writes a mesh by extension: .ply (binary little-endian), .obj, .stl (binary), .off, .gltf, .glb. The write is
-/// atomic. Throws MeshError for an unknown extension or a write failure.
-void save_mesh(const std::filesystem::path& path, const sim::TriMesh& mesh);
+/// Writes a mesh by extension: .ply (binary little-endian, `ply` precision), .obj and .off (shortest round-trip
+/// decimals), .stl (binary, float32 by the format), .gltf, .glb. The write is atomic. Throws MeshError for an unknown
+/// extension or a write failure.
+void save_mesh(const std::filesystem::path& path, const sim::TriMesh& mesh,
+               PlyPrecision ply = PlyPrecision::double_);
 
 /// Validates `mesh` as a solid's surface (SPEC §2.4) and returns its warnings. Checks, in this order: vertex indices in
 /// range, finite coordinates, no degenerate triangle (a repeated vertex index, or twice the area at most 1e-12 times
@@ -47,8 +55,8 @@ void save_mesh(const std::filesystem::path& path, const sim::TriMesh& mesh);
 /// the first offending vertex, triangle or edge.
 std::vector<std::string> validate_mesh(sim::TriMesh& mesh, const std::string& file, bool self_intersections);
 
-/// The bytes of a binary little-endian PLY file (float32 x y z, uchar/int32 vertex_indices). Deterministic: the
-/// same mesh always gives the same bytes, with no timestamps or tool versions in the header.
-std::string encode_ply_binary(const sim::TriMesh& mesh);
+/// The bytes of a binary little-endian PLY file (x y z as float64 or float32, uchar/int32 vertex_indices).
+/// Deterministic: the same mesh always gives the same bytes, with no timestamps or tool versions in the header.
+std::string encode_ply_binary(const sim::TriMesh& mesh, PlyPrecision precision = PlyPrecision::double_);
 
 }  // namespace octocut::engine

@@ -13,6 +13,7 @@ struct CutCommandOptions {
   double scale = 1.0;         ///< multiplies both inputs' coordinates to get metres
   double cell_size = 0.0;     ///< M's cell size, m; 0 = 1 mm, raised when the object would need more than 2e5 cells
   bool verify = true;         ///< check S' locally after the boolean
+  bool ply_float = false;     ///< a .ply output in float32 instead of float64
 };
 
 /// What the command did. exit_code: 0 ok or no-op, 1 the cut failed (report written, no mesh), 2 bad input (nothing

@@ -143,6 +143,7 @@ struct OutputSettings {
   bool frames = false;
   bool surface_final = false;
   int surface_every = 0;
+  bool ply_float = false;  ///< PLY files in float32 instead of float64 (`ply_precision`)
 };
 
 /// A cylindrical blade in tool coordinates: axis z, centred on the tool origin (`tools[]/blade/cylinder`).

@@ -6,45 +6,6 @@
 
 namespace octocut::sim {
 
-Mat24 unit_hex_stiffness(double nu) {
-  // Isotropic elasticity for E = 1 in Voigt order (xx, yy, zz, xy, yz, zx) with engineering shear strains.
-  const double lambda = nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
-  const double mu = 1.0 / (2.0 * (1.0 + nu));
-  Eigen::Matrix<double, 6, 6> D = Eigen::Matrix<double, 6, 6>::Zero();
-  D.topLeftCorner<3, 3>().setConstant(lambda);
-  D.topLeftCorner<3, 3>().diagonal().array() += 2.0 * mu;
-  D.bottomRightCorner<3, 3>().diagonal().setConstant(mu);
-
-  // 2x2x2 Gauss quadrature on [0,1]^3, each point weighted 1/8.
-  const double g[2] = {0.5 - 0.5 / std::sqrt(3.0), 0.5 + 0.5 / std::sqrt(3.0)};
-  Mat24 K = Mat24::Zero();
-  for (int q = 0; q < 8; ++q) {
-    const double xi[3] = {g[q & 1], g[(q >> 1) & 1], g[(q >> 2) & 1]};
-    Eigen::Matrix<double, 6, 24> B = Eigen::Matrix<double, 6, 24>::Zero();
-    for (int a = 0; a < 8; ++a) {
-      // Shape function N_a = prod_d (bit ? xi_d : 1 - xi_d) and its gradient.
-      double f[3], df[3];
-      for (int d = 0; d < 3; ++d) {
-        const bool bit = (a >> d) & 1;
-        f[d] = bit ? xi[d] : 1.0 - xi[d];
-        df[d] = bit ? 1.0 : -1.0;
-      }
-      const double gx = df[0] * f[1] * f[2], gy = f[0] * df[1] * f[2], gz = f[0] * f[1] * df[2];
-      B(0, 3 * a + 0) = gx;
-      B(1, 3 * a + 1) = gy;
-      B(2, 3 * a + 2) = gz;
-      B(3, 3 * a + 0) = gy;
-      B(3, 3 * a + 1) = gx;
-      B(4, 3 * a + 1) = gz;
-      B(4, 3 * a + 2) = gy;
-      B(5, 3 * a + 0) = gz;
-      B(5, 3 * a + 2) = gx;
-    }
-    K.noalias() += 0.125 * B.transpose() * D * B;
-  }
-  return K;
-}
-
 namespace {
 // Isotropic elasticity for E = 1 in Voigt order (xx, yy, zz, xy, yz, zx) with engineering shear strains.
 Eigen::Matrix<double, 6, 6> unit_elasticity(double nu) {
@@ -81,6 +42,20 @@ Eigen::Matrix<double, 6, 24> unit_strain_operator(const double xi[3]) {
   return B;
 }
 }  // namespace
+
+Mat24 unit_hex_stiffness(double nu) {
+  const Eigen::Matrix<double, 6, 6> D = unit_elasticity(nu);
+  // 2x2x2 Gauss quadrature on [0,1]^3, each point weighted 1/8.
+  const double g[2] = {0.5 - 0.5 / std::sqrt(3.0), 0.5 + 0.5 / std::sqrt(3.0)};
+  Mat24 K = Mat24::Zero();
+  for (int q = 0; q < 8; ++q) {
+    const double xi[3] = {g[q & 1], g[(q >> 1) & 1], g[(q >> 2) & 1]};
+    const Eigen::Matrix<double, 6, 24> B = unit_strain_operator(xi);
+    K.noalias() += 0.125 * B.transpose() * D * B;
+  }
+  return K;
+}
+
 
 Mat24 unit_hex_stiffness_bbar(double nu) {
   const Eigen::Matrix<double, 6, 6> D = unit_elasticity(nu);

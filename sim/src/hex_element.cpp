@@ -56,7 +56,6 @@ Mat24 unit_hex_stiffness(double nu) {
   return K;
 }
 
-
 Mat24 unit_hex_stiffness_bbar(double nu) {
   const Eigen::Matrix<double, 6, 6> D = unit_elasticity(nu);
   const double g[2] = {0.5 - 0.5 / std::sqrt(3.0), 0.5 + 0.5 / std::sqrt(3.0)};

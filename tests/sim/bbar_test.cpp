@@ -11,6 +11,7 @@
 #include <random>
 
 #include "octocut/sim/hex_element.hpp"
+#include "sim/reference/cantilever_reference.hpp"
 #include "test_util.hpp"
 
 namespace octocut::sim {
@@ -120,16 +121,13 @@ double cantilever_tip(int level, double nu, HexFormulation element) {
   return -sim.position(*m.embed(Vec3(kL, 0, 0))).z();
 }
 
-// Converged tip deflections, m, from another code: CalculiX 2.x (Debian calculix-ccx), 60 x 12 x 12 quadratic
-// hexahedra with reduced integration (C3D20R), linear static, the same beam, clamp and load:
-//   python3 tests/sim/reference/cantilever_ccx.py --meshes 20x4x4,40x8x8,60x12x12 --nu 0.3,0.49
-// gives 3.754991e-4, 3.762014e-4, 3.763987e-4 (nu = 0.3) and 3.613713e-4, 3.644247e-4, 3.652993e-4 (nu = 0.49). The
-// last refinement moves them by 0.05% and 0.24%: the values below are converged to well within the 1% and 5%
-// tolerances they check (what is left is the clamp's corner singularity, which converges slowly and only raises the
-// nearly incompressible value, by about 0.3% by extrapolation). At nu = 0.3 the value lies, as it must, between
-// Euler-Bernoulli (3.679e-4) and Timoshenko (3.832e-4). The corotational model is geometrically nonlinear but
-// deflects by 0.4% of the length, so the linear reference differs from its answer by O(1e-5) only.
-constexpr double kCcxTip03 = 3.763987e-4, kCcxTip049 = 3.652993e-4;
+// Converged tip deflections, m, from another code (CalculiX, C3D20R 60 x 12 x 12; sim/reference/
+// cantilever_reference.hpp): the last refinement of that sequence moves them by 0.05% (nu = 0.3) and 0.24% (nu =
+// 0.49), so they are converged to well within the 1% and 5% tolerances they check (what is left is the clamp's corner
+// singularity, which converges slowly and only raises the nearly incompressible value, by about 0.3% by
+// extrapolation). The corotational model is geometrically nonlinear but deflects by 0.4% of the length, so the linear
+// reference differs from its answer by O(1e-5) only.
+constexpr double kCcxTip03 = ::octocut::test::kCantileverTipNu03, kCcxTip049 = ::octocut::test::kCantileverTipNu049;
 
 TEST(CantileverBbar, NearlyIncompressibleBeamComesWithinFivePercentAtLevel5) {
   const double bbar = cantilever_tip(5, 0.49, HexFormulation::bbar);

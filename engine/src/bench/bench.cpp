@@ -48,8 +48,8 @@ struct BenchOutput {
 };
 
 // The step benchmark of issue 2: a 1 cm cube of 10 x 10 x 10 leaves (E = 5e4 Pa, nu = 0.45, rho = 1000 kg/m^3),
-// bottom fixed, under gravity, dt = 1 ms.
-sim::ObjectModel cube10() {
+// bottom fixed, under gravity, dt = 1 ms; trilinear hexahedra unless `element` says otherwise.
+sim::ObjectModel cube10(sim::HexFormulation element = sim::HexFormulation::trilinear) {
   sim::OctreeSpec spec;
   spec.root = {sim::Vec3::Zero(), 0.016};  // level 4 cells are 1 mm
   spec.base_level = 4;
@@ -58,6 +58,7 @@ sim::ObjectModel cube10() {
   p.young_modulus = 5e4;
   p.poisson_ratio = 0.45;
   p.density = 1000.0;
+  p.element = element;
   sim::HandleSpec bottom{{sim::Vec3(-0.001, -0.001, -0.001), sim::Vec3(0.011, 0.011, 1e-9)}, {}};
   return sim::ObjectModel::build(spec, std::make_shared<sim::BoxMaterial>(sim::Box3{sim::Vec3::Zero(), sim::Vec3::Constant(0.01)}),
                                  p, {bottom});
@@ -72,14 +73,14 @@ struct StepRun {
 };
 
 StepRun run_cube(const std::string& solver, const std::string& preconditioner, double tolerance, int steps,
-                 int threads) {
+                 int threads, sim::HexFormulation element = sim::HexFormulation::trilinear) {
   sim::SimulatorOptions o;
   o.dt = 1e-3;
   o.linear_solver = solver;
   o.preconditioner = preconditioner;
   o.tolerance = tolerance;
   o.threads = threads;
-  sim::Simulator s(cube10(), o);
+  sim::Simulator s(cube10(element), o);
   const sim::Vec3 top(0.005, 0.005, 0.01);
   const auto e = *s.model().embed(top);
   StepRun r;
@@ -107,11 +108,14 @@ std::filesystem::path asset_path(const std::string& relative) {
 std::vector<BenchOutput> bench_step(const std::string& variant) {
   const int steps = 400;
   const int threads = 0;
+  // cube10-bbar: the cube10 case with B-bar hexahedra (issue 17 §3), its reference B-bar too.
+  const sim::HexFormulation element =
+      variant == "cube10-bbar" ? sim::HexFormulation::bbar : sim::HexFormulation::trilinear;
   // The exact reference: CHOLMOD factorises and solves every step.
-  const StepRun ref = run_cube("cholmod", "cholesky", 1e-12, steps, threads);
+  const StepRun ref = run_cube("cholmod", "cholesky", 1e-12, steps, threads, element);
   StepRun run;
-  if (variant == "cube10")
-    run = run_cube("pcg", "cholesky", 1e-3, steps, threads);
+  if (variant == "cube10" || variant == "cube10-bbar")
+    run = run_cube("pcg", "cholesky", 1e-3, steps, threads, element);
   else if (variant == "cube10-jacobi")
     run = run_cube("pcg", "jacobi", 1e-4, steps, threads);
   else
@@ -124,7 +128,7 @@ std::vector<BenchOutput> bench_step(const std::string& variant) {
     max_dev = std::max(max_dev, (run.probe[i] - ref.probe[i]).norm());
     max_ref = std::max(max_ref, ref.probe[i].norm());
   }
-  const sim::ObjectModel m = cube10();
+  const sim::ObjectModel m = cube10(element);
   BenchOutput b;
   b.name = "step/" + variant;
   // The first steps include the symbolic analysis and the first factorisation: report steady state.
@@ -135,7 +139,8 @@ std::vector<BenchOutput> bench_step(const std::string& variant) {
   const std::string pre = variant == "cube10-jacobi" ? "jacobi" : (solver == "pcg" ? "cholesky" : "none");
   b.params = {{"leaves", "10x10x10"}, {"edge_m", 0.01}, {"young_modulus_pa", 5e4}, {"poisson_ratio", 0.45},
               {"density_kg_m3", 1000.0}, {"dt_s", 1e-3}, {"steps", steps}, {"linear_solver", solver},
-              {"preconditioner", pre}, {"threads", int(std::thread::hardware_concurrency())}};
+              {"preconditioner", pre}, {"threads", int(std::thread::hardware_concurrency())},
+              {"element", element == sim::HexFormulation::bbar ? "bbar" : "trilinear"}};
   std::vector<double> rot, frc, asmb, slv;
   for (std::size_t i = 10; i < run.profile.size(); ++i) {
     rot.push_back(run.profile[i].rotations);
@@ -526,6 +531,7 @@ std::vector<Entry> registry() {
   return {{"step/cube10", [] { return bench_step("cube10"); }},
           {"step/cube10-jacobi", [] { return bench_step("cube10-jacobi"); }},
           {"step/cube10-cholmod", [] { return bench_step("cube10-cholmod"); }},
+          {"step/cube10-bbar", [] { return bench_step("cube10-bbar"); }},
           {"material_graph/meniscus10k", [] { return bench_material_graph(); }},
           {"embedding/depth3", [] { return bench_embedding(3); }},
           {"embedding/depth4", [] { return bench_embedding(4); }},

@@ -67,6 +67,7 @@ void SimRunner::set_paused(bool p) {
   push({p ? SessionEventKind::pause : SessionEventKind::resume, {}, {}, {}, false});
 }
 void SimRunner::single_step() { push({SessionEventKind::pause, {}, {}, {}, true}); }
+void SimRunner::hold(std::size_t tool) { push({SessionEventKind::hold, {}, {}, {}, false, tool}); }
 void SimRunner::reset() { push({SessionEventKind::reset, {}, {}, {}, false}); }
 void SimRunner::set_overlays(const OverlaySettings& o) { push({SessionEventKind::pose, {}, {}, o, false}); }
 
@@ -116,9 +117,10 @@ void SimRunner::record(SessionEventKind kind, const sim::Pose& pose, const Mater
 }
 
 void SimRunner::take_in_hand() {
+  m_world->set_overlays(m_overlays);
+  if (m_scene.tools.empty()) return;  // nothing to hold: the viewer only watches
   m_world->hold_tool(m_hand);
   record(SessionEventKind::hold);
-  m_world->set_overlays(m_overlays);
 }
 
 void SimRunner::apply(const Command& c) {
@@ -131,6 +133,8 @@ void SimRunner::apply(const Command& c) {
     ++m_single_steps;
     return;
   }
+  const bool hand_input = c.kind == SessionEventKind::pose || c.kind == SessionEventKind::cut;
+  if (hand_input && m_scene.tools.empty()) return;
   switch (c.kind) {
     case SessionEventKind::pose:
       m_world->set_tool_pose(m_hand, c.pose);
@@ -167,17 +171,25 @@ void SimRunner::apply(const Command& c) {
       m_sim_anchor = m_rate_sim = m_world->time();
       break;
     case SessionEventKind::reset: {
-      const sim::Pose pose = m_world->tool_pose(m_hand);
+      const std::optional<sim::Pose> pose =
+          m_scene.tools.empty() ? std::nullopt : std::optional<sim::Pose>(m_world->tool_pose(m_hand));
       m_world.emplace(m_scene, WorldOptions{true, true});
       record(c.kind);
       take_in_hand();
-      m_world->set_tool_pose(m_hand, pose);
-      record(SessionEventKind::pose, pose);
+      if (pose) {
+        m_world->set_tool_pose(m_hand, *pose);
+        record(SessionEventKind::pose, *pose);
+      }
       m_wall_anchor = m_rate_wall = Clock::now();
       m_sim_anchor = m_rate_sim = 0.0;
       break;
     }
-    case SessionEventKind::hold: break;
+    case SessionEventKind::hold:
+      if (c.tool < m_scene.tools.size() && c.tool != m_hand) {
+        m_hand = c.tool;
+        take_in_hand();
+      }
+      break;
   }
 }
 

@@ -56,6 +56,8 @@ class SimRunner {
   void set_paused(bool paused);
   void single_step();  ///< one step while paused
   void reset();
+  /// Takes tool `tool` in hand instead (the one held before stays where it is).
+  void hold(std::size_t tool);
   void set_overlays(const OverlaySettings& overlays);
 
   /// Asks for a new frame; take_frame() returns it once the simulation thread has made it.
@@ -77,6 +79,7 @@ class SimRunner {
     Material material;
     std::optional<OverlaySettings> overlays;  ///< set: an overlay change (not recorded)
     bool single_step = false;                 ///< a single step request (not recorded)
+    std::size_t tool = 0;                     ///< hold: the tool to take in hand
   };
   void push(Command c);
   void loop();

@@ -52,7 +52,7 @@ class HandTool {
 
  private:
   std::string m_name;
-  sim::Mat3 m_base;            // the rotation before the roll
+  sim::Mat3 m_base = sim::Mat3::Identity();  // the rotation before the roll
   double m_roll_deg = 0.0;     // about the tool's z axis, degrees
   double m_depth_steps = 0.0;  // along the view ray, steps
   sim::Pose m_pose;            // the last pose given

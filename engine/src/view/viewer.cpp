@@ -320,9 +320,8 @@ void Viewer::panel() {
     m_material_loaded = true;
   }
   ImGui::SetNextWindowPos(ImVec2(8, 8), ImGuiCond_Once);
-  ImGui::SetNextWindowSize(ImVec2(300, 0), ImGuiCond_Once);
   ImGui::SetNextWindowBgAlpha(0.8f);
-  ImGui::Begin(m_scene.name.c_str());
+  ImGui::Begin(m_scene.name.c_str(), nullptr, ImGuiWindowFlags_AlwaysAutoResize);
   panel_stats(s);
   panel_controls(s);
   ImGui::End();
@@ -333,8 +332,7 @@ void Viewer::panel_stats(const SimStats& s) {
   if (s.paused)
     ImGui::TextColored(ImVec4(1.0f, 0.8f, 0.3f, 1.0f), "paused (Space resumes, N steps)");
   else if (s.behind)
-    ImGui::TextColored(ImVec4(1.0f, 0.6f, 0.2f, 1.0f), "slower than real time: time runs at x%.2f",
-                       s.real_time_factor);
+    ImGui::TextColored(ImVec4(1.0f, 0.6f, 0.2f, 1.0f), "slower than real time: time slowed down");
   if (s.cutting) ImGui::TextColored(ImVec4(1.0f, 0.4f, 0.4f, 1.0f), "cutting...");
   const double draw_ms = m_draw_ms.empty() ? 0.0 : m_draw_ms.back();
   ImGui::Text("%.2f ms/step   %.1f ms/frame (draw %.1f)", s.step_ms, m_frame_ms, draw_ms);
@@ -357,7 +355,7 @@ void Viewer::panel_controls(const SimStats& s) {
     changed |= ImGui::Checkbox("DOFs", &m_overlays.dofs);
     changed |= ImGui::Checkbox("hanging slots", &m_overlays.hanging);
     if (changed) m_runner.set_overlays(m_overlays);
-    ImGui::TextDisabled("contact points and forces: no contact yet");
+    ImGui::TextDisabled("contact points, forces: no contact yet");
   }
   if (ImGui::CollapsingHeader("material", ImGuiTreeNodeFlags_DefaultOpen)) {
     bool edited = false;
@@ -380,7 +378,21 @@ void Viewer::panel_controls(const SimStats& s) {
   if (ImGui::Button("step") && m_paused) m_runner.single_step();
   ImGui::SameLine();
   if (ImGui::Button("reset")) m_runner.reset();
-  ImGui::TextDisabled("tool in hand: %s", m_hand.name().c_str());
+  if (m_scene.tools.size() > 1) {
+    int picked = int(m_hand_index);
+    const auto name = [](void* data, int i, const char** out) {
+      *out = static_cast<const Scene*>(data)->tools[std::size_t(i)].name.c_str();
+      return true;
+    };
+    if (ImGui::Combo("tool in hand", &picked, name, const_cast<Scene*>(&m_scene), int(m_scene.tools.size())) &&
+        std::size_t(picked) != m_hand_index) {
+      m_hand_index = std::size_t(picked);
+      m_hand = HandTool(m_scene, m_hand_index);
+      m_runner.hold(m_hand_index);
+    }
+  } else {
+    ImGui::TextDisabled("tool in hand: %s", m_hand.name().c_str());
+  }
   if (!m_options.record_path.empty()) ImGui::TextDisabled("recording to %s", m_options.record_path.c_str());
   if (m_writer) ImGui::TextColored(ImVec4(1.0f, 0.3f, 0.3f, 1.0f), "writing frames (R stops)");
   if (!m_note.empty()) ImGui::TextDisabled("%s", m_note.c_str());

@@ -2,6 +2,9 @@
 // a Dear ImGui panel, the camera controls and the tool in the hand. The simulation runs on SimRunner's thread; this
 // thread only draws the latest complete frame and turns input into commands. See viewer.hpp and README "Viewer".
 #include <epoxy/gl.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
 #define GLFW_INCLUDE_NONE
 #include <GLFW/glfw3.h>
 #include <imgui.h>
@@ -108,11 +111,20 @@ extern "C" void on_cursor(GLFWwindow* w, double, double) {
 }
 
 // The window and its GL context: exit 2 with a clear message when there is no display.
-std::optional<std::string> open_window(Glfw& glfw, const std::string& title, int width, int height) {
+std::optional<std::string> open_display() {
   glfwSetErrorCallback(on_glfw_error);
   if (!glfwInit())
     return "cannot open a window: " + g_glfw_error +
            "; octocut view needs a display (set DISPLAY, or run it under xvfb-run); `octocut run` needs none";
+  return std::nullopt;
+}
+
+// Gives this thread, and the threads it starts from now on (Mesa llvmpipe's rasteriser threads start with the GL
+// context), a lower CPU priority than the simulation thread started before: on a machine whose cores software GL
+// and the simulation share, drawing then takes what the simulation leaves. Best effort (nice +10 of this thread).
+void lower_drawing_priority() { (void)setpriority(PRIO_PROCESS, pid_t(syscall(SYS_gettid)), 10); }
+
+std::optional<std::string> open_window(Glfw& glfw, const std::string& title, int width, int height) {
   glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 3);
   glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 3);
   glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
@@ -129,8 +141,8 @@ std::optional<std::string> open_window(Glfw& glfw, const std::string& title, int
 // Everything one viewer session holds besides the window.
 class Viewer {
  public:
-  Viewer(const Scene& scene, const ViewOptions& options, GLFWwindow* window, std::size_t hand)
-      : m_scene(scene), m_options(options), m_window(window),
+  Viewer(const Scene& scene, const ViewOptions& options, std::size_t hand)
+      : m_scene(scene), m_options(options),
         m_out(options.out_dir.empty() ? fs::path(".") : fs::path(options.out_dir)),
         m_runner(scene, hand, options.sets), m_hand(scene, hand), m_hand_index(hand) {}
 
@@ -150,7 +162,7 @@ class Viewer {
 
   const Scene& m_scene;
   const ViewOptions& m_options;
-  GLFWwindow* m_window;
+  GLFWwindow* m_window = nullptr;
   fs::path m_out;
   SimRunner m_runner;
   HandTool m_hand;
@@ -173,10 +185,13 @@ class Viewer {
   Eigen::Vector2d m_last_cursor = Eigen::Vector2d::Zero();  // window pixels
 
  public:
-  void init() {
+  // The simulation starts before the window exists, so that its thread keeps the normal priority.
+  void start_simulation() { m_runner.start(); }
+  // The window's GL objects, in its current context.
+  void init(GLFWwindow* window) {
+    m_window = window;
     m_drawer.emplace();
     m_overlays = m_scene.render.overlays;
-    m_runner.start();
   }
 };
 
@@ -455,14 +470,17 @@ ViewResult run_viewer(const Scene& scene, const ViewOptions& options) {
   const int width = options.width > 0 ? options.width : scene.render.width;
   const int height = options.height > 0 ? options.height : scene.render.height;
 
-  // The display first: without one nothing else is built.
+  // The display first: without one nothing else is built. Then the world and its thread, then the window.
   Glfw glfw;
-  if (const std::optional<std::string> e = open_window(glfw, "octocut \u2014 " + scene.name, width, height))
-    return {2, *e};
+  if (const std::optional<std::string> e = open_display()) return {2, *e};
   std::optional<Viewer> viewer;
   try {
-    viewer.emplace(scene, options, glfw.window, hand);
-    viewer->init();
+    viewer.emplace(scene, options, hand);
+    viewer->start_simulation();
+    lower_drawing_priority();
+    if (const std::optional<std::string> e = open_window(glfw, "octocut \u2014 " + scene.name, width, height))
+      return {2, *e};
+    viewer->init(glfw.window);
   } catch (const SceneError& e) {
     return {2, e.what()};
   } catch (const RenderError& e) {

@@ -168,8 +168,10 @@ TEST_F(CliViewTest, MouseCutRecordReplayAndScreenshot) {
   camera.up = {0.0, 1.0, 0.0};
   camera.fov_deg = 45.0;
   const Eigen::Vector3d punch = octocut::engine::project_to_pixel(camera, kWidth, kHeight, {0.018, 0.0017, 0.002});
-  const std::string park = "mousemove --window " + id + " " + std::to_string(kWidth - 20) + " 20";
-  const std::string over = "mousemove --window " + id + " " + std::to_string(int(punch.x())) + " " +
+  // --sync: xdotool returns once the pointer has moved, so that the X server has queued the motion before the key or
+  // the click that follows (xdotool's runs are separate clients; a loaded server need not serve them in order).
+  const std::string park = "mousemove --sync --window " + id + " " + std::to_string(kWidth - 20) + " 20";
+  const std::string over = "mousemove --sync --window " + id + " " + std::to_string(int(punch.x())) + " " +
                            std::to_string(int(punch.y()));
 
   // Before: the tool parked off the tissue, a screenshot.

@@ -334,11 +334,16 @@ void Viewer::panel() {
     m_material_edit = s.material;
     m_material_loaded = true;
   }
+  // A fixed width, the height fitted to the content (ImGui's AlwaysAutoResize with the default item widths, which are
+  // a fraction of the window's, lets the panel grow over the view frame after frame).
   ImGui::SetNextWindowPos(ImVec2(8, 8), ImGuiCond_Once);
+  ImGui::SetNextWindowSize(ImVec2(330, 0), ImGuiCond_Always);
   ImGui::SetNextWindowBgAlpha(0.8f);
-  ImGui::Begin(m_scene.name.c_str(), nullptr, ImGuiWindowFlags_AlwaysAutoResize);
+  ImGui::Begin(m_scene.name.c_str());
+  ImGui::PushItemWidth(150);
   panel_stats(s);
   panel_controls(s);
+  ImGui::PopItemWidth();
   ImGui::End();
 }
 

@@ -366,6 +366,7 @@ void World::set_tool_pose(std::size_t tool, const sim::Pose& pose) { m->tools.at
 void World::release_tool(std::size_t tool) { m->tools.at(tool).driven.reset(); }
 void World::hold_tool(std::size_t tool) {
   ToolRuntime& tr = m->tools.at(tool);
+  m->ensure_blade(tool);  // a held tool cuts: a bad blade is bad input now, not at the first cut
   tr.driven = m->tool_pose(tool, time());
   const auto first = m->events.begin() + std::ptrdiff_t(m->next_event);
   m->events.erase(std::remove_if(first, m->events.end(), [&](const CutEvent& e) { return e.tool == tool; }),

@@ -147,6 +147,15 @@ TEST_F(WorldTest, AHeldToolLosesItsTimelineCutsAndStaysWhereItIs) {
   EXPECT_TRUE(world.report().cuts.empty());
   EXPECT_TRUE(world.tool_pose(0).position.isApprox(before.position, 0.0));
   EXPECT_THROW(world.hold_tool(7), std::out_of_range);
+  // A tool without cut events loads its blade only when a person takes it: an open blade is bad input then.
+  write("open.obj", "v 0 0 0\nv 0.001 0 0\nv 0 0.001 0\nf 1 2 3\n");
+  World open(scene(kCube, {"/tools/1/blade=open.obj"}), WorldOptions{.render = false});
+  try {
+    open.hold_tool(1);
+    ADD_FAILURE() << "an open blade was taken in hand";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("/tools/1/blade"), std::string::npos) << e.what();
+  }
 }
 
 TEST_F(WorldTest, MaterialEditsApplyFromNowOnAndBadOnesChangeNothing) {

@@ -88,8 +88,8 @@ class World {
   /// Gives tool `tool` back to its keyframes.
   void release_tool(std::size_t tool);
   /// A person takes tool `tool` in hand (the viewer): its cut events still on the timeline are dropped, and it
-  /// stays where it is now until set_tool_pose moves it; everything else keeps its keyframes. Throws
-  /// std::out_of_range for a bad index.
+  /// stays where it is now until set_tool_pose moves it; everything else keeps its keyframes. Its blade is loaded
+  /// now. Throws std::out_of_range for a bad index, SceneError for a bad blade file.
   void hold_tool(std::size_t tool);
   /// Where tool `tool` is now (tool coordinates to world).
   [[nodiscard]] sim::Pose tool_pose(std::size_t tool) const;

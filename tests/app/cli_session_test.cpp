@@ -13,6 +13,7 @@
 #include "octocut/engine/run/session.hpp"
 #include "octocut/engine/run/tool.hpp"
 #include "octocut/engine/scene/scene_loader.hpp"
+#include "octocut/sim/pose.hpp"
 
 namespace {
 
@@ -91,6 +92,30 @@ TEST_F(CliSessionTest, ReplayCutsAtTheRecordedStepAndIsDeterministic) {
   EXPECT_EQ(a["surface"]["closed"], true);
   // The same session again: the same report apart from timings.
   EXPECT_EQ(without_timings(a), without_timings(replay("b")));
+}
+
+TEST_F(CliSessionTest, AResetStartsANewWorldAndTheStepsCountFromZero) {
+  // The viewer's reset: the cut before it is gone with its world; the session's last world cuts at its own step 2.
+  const fs::path scene = meniscus();
+  engine::Session s = session(scene);
+  s.events.pop_back();  // no material edit
+  const engine::Scene loaded = engine::load_scene(scene.string());
+  const double dt = loaded.solver.dt;
+  const sim::Pose pose = engine::tool_pose(loaded.tools[0], 0.7);
+  s.events.push_back({engine::SessionEventKind::reset, 8, 8 * dt, 0, {}, {}});
+  s.events.push_back({engine::SessionEventKind::hold, 0, 0.0, 0, {}, {}});
+  s.events.push_back({engine::SessionEventKind::pose, 0, 0.0, 0, pose, {}});
+  s.events.push_back({engine::SessionEventKind::cut, 2, 2 * dt, 0, {}, {}});
+  s.end_step = 4;
+  const fs::path file = write("reset.json", engine::session_json(s));
+  const CommandResult r = run_octocut("run '" + scene.string() + "' --replay '" + file.string() +
+                                      "' --no-render --quiet --out '" + (m_dir / "o").string() + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json report = read_json(m_dir / "o" / "report.json");
+  EXPECT_EQ(report["steps"].get<long>(), 4);
+  ASSERT_EQ(report["cuts"].size(), 1u) << report["cuts"].dump();
+  EXPECT_NEAR(report["cuts"][0]["t"].get<double>(), 2 * dt, 1e-12);
+  EXPECT_EQ(report["cuts"][0]["status"], "ok");
 }
 
 TEST_F(CliSessionTest, MaterialEditChangesTheMotion) {

@@ -18,6 +18,8 @@
 #include "octocut/engine/run/tool.hpp"
 #include "octocut/engine/run/run.hpp"
 #include "octocut/engine/run/scene_object.hpp"
+#include "octocut/engine/run/session.hpp"
+#include "octocut/engine/view/viewer.hpp"
 #include "octocut/version.hpp"
 
 namespace {
@@ -64,10 +66,29 @@ int regenerate_report(const std::string& scene_path, const std::string& report_p
   return check_report(engine::load_scene(scene_path), report_path);
 }
 
-int cmd_run(const std::string& scene_path, const std::vector<std::string>& sets, const std::string& out,
-            bool no_render, bool quiet, ExpectedMode expected) {
+/// The session file of `--replay`, parsed and validated (SceneError naming the file and pointer, exit 2).
+engine::Session read_session(const std::string& path) {
+  std::string text;
+  try {
+    text = engine::read_file(path);
+  } catch (const std::runtime_error& e) {
+    throw engine::SceneError(path + ": cannot read the session file: " + e.what());
+  }
+  return engine::parse_session(text, path);
+}
+
+int cmd_run(const std::string& scene_path, std::vector<std::string> sets, const std::string& out,
+            bool no_render, bool quiet, ExpectedMode expected, const std::string& replay_path) {
+  // A replay runs with the overrides it was recorded with, then those given now.
+  std::optional<engine::Session> session;
+  if (!replay_path.empty()) {
+    session = read_session(replay_path);
+    sets.insert(sets.begin(), session->sets.begin(), session->sets.end());
+  }
   const engine::Scene scene = engine::load_scene(scene_path, sets);
+  if (session) engine::check_session_scene(*session, scene, replay_path);
   engine::RunOptions o;
+  o.replay = session ? &*session : nullptr;
   o.out_dir = out;
   o.no_render = no_render;
   o.progress = !quiet;
@@ -86,6 +107,15 @@ int cmd_run(const std::string& scene_path, const std::vector<std::string>& sets,
   if (expected == ExpectedMode::check) return check_report(scene, r.report_path);
   if (expected == ExpectedMode::regenerate) return regenerate_report(scene_path, r.report_path);
   return 0;
+}
+
+int cmd_view(const std::string& scene_path, const std::vector<std::string>& sets, const engine::ViewOptions& options) {
+  const engine::Scene scene = engine::load_scene(scene_path, sets);
+  engine::ViewOptions o = options;
+  o.sets = sets;
+  const engine::ViewResult r = engine::run_viewer(scene, o);
+  if (r.exit_code != 0) std::fprintf(stderr, "octocut: %s\n", r.error.c_str());
+  return r.exit_code;
 }
 
 int cmd_validate(const std::string& scene_path, const std::vector<std::string>& sets) {
@@ -195,6 +225,22 @@ int main(int argc, char** argv) {
                 "(same pointers and kinds of tolerance; atomic; the rest of the file is kept byte for byte)")
       ->excludes(check_flag);
 
+  std::string replay_path;
+  run->add_option("--replay", replay_path,
+                  "Replay a session recorded by `octocut view --record` instead of the scene's timeline (its inputs "
+                  "at the steps they took effect; headless, deterministic)");
+
+  auto* view = app.add_subcommand("view", "Open the interactive viewer: the scene running in real time, the first tool "
+                                          "in the hand (needs a display)");
+  engine::ViewOptions view_opts;
+  std::string view_size;
+  view->add_option("scene", scene_path, "Scene file (JSON)")->required();
+  view->add_option("--set", sets, "Override a scene key: /json/pointer=value (repeatable)");
+  view->add_option("--record", view_opts.record_path, "Write the session (every input with its step) here on exit");
+  view->add_option("--out", view_opts.out_dir, "Write report.json here on exit; screenshots and frames go here too");
+  view->add_option("--size", view_size, "Window size WIDTHxHEIGHT in pixels (default: the scene's render size)");
+  view->add_option("--tool", view_opts.tool, "The tool in the hand, by name (default: the first)");
+
   auto* validate = app.add_subcommand("validate", "Load and check a scene, run nothing");
   validate->add_option("scene", scene_path, "Scene file (JSON)")->required();
   validate->add_option("--set", sets, "Override a scene key: /json/pointer=value (repeatable)");
@@ -249,7 +295,18 @@ int main(int argc, char** argv) {
   try {
     if (*run) {
       const ExpectedMode mode = check ? ExpectedMode::check : regenerate ? ExpectedMode::regenerate : ExpectedMode::none;
-      return cmd_run(scene_path, sets, out, no_render, quiet, mode);
+      return cmd_run(scene_path, sets, out, no_render, quiet, mode, replay_path);
+    }
+    if (*view) {
+      if (!view_size.empty()) {
+        int w = 0, h = 0;
+        char tail = 0;
+        if (std::sscanf(view_size.c_str(), "%dx%d%c", &w, &h, &tail) != 2 || w < 64 || h < 64 || w > 8192 || h > 8192)
+          throw std::invalid_argument("--size " + view_size + ": expected WIDTHxHEIGHT, each in 64..8192 pixels");
+        view_opts.width = w;
+        view_opts.height = h;
+      }
+      return cmd_view(scene_path, sets, view_opts);
     }
     if (*validate) return cmd_validate(scene_path, sets);
     if (*bench && list) {

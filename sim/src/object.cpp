@@ -256,6 +256,29 @@ ObjectModel ObjectModel::without_leaves(const std::vector<int>& leaves) const {
   return m;
 }
 
+ObjectModel ObjectModel::with_params(const MaterialParams& p) const {
+  const bool finite = std::isfinite(p.young_modulus) && std::isfinite(p.poisson_ratio) && std::isfinite(p.density) &&
+                      std::isfinite(p.rayleigh_mass) && std::isfinite(p.rayleigh_stiffness);
+  if (!finite || p.young_modulus <= 0.0 || p.poisson_ratio < 0.0 || p.poisson_ratio >= 0.5 || p.density <= 0.0 ||
+      p.rayleigh_mass < 0.0 || p.rayleigh_stiffness < 0.0)
+    throw std::invalid_argument("ObjectModel::with_params: need E > 0, 0 <= nu < 0.5, density > 0 and damping >= 0");
+  ObjectModel m = *this;
+  m.m_params = p;
+  m.m_revision = m_revision + 1;
+  m.m_unit_k = unit_hex_stiffness(p.poisson_ratio);
+  // Stiffness scale E phi h and lumped mass rho phi h^3 / 8 per slot, as finish() computes them.
+  for (int e = 0; e < num_elements(); ++e)
+    m.m_k_scale[std::size_t(e)] = p.young_modulus * m_occupancy[std::size_t(e)] * m_edge[std::size_t(e)];
+  m.m_dof_mass.assign(std::size_t(m_dofs.num_dofs), 0.0);
+  for (int s = 0; s < m_dofs.num_slots(); ++s) {
+    const double h = m_edge[std::size_t(s / 8)];
+    const double ms = p.density * m_occupancy[std::size_t(s / 8)] * h * h * h / 8.0;
+    for (int i = m_dofs.slot_begin[std::size_t(s)]; i < m_dofs.slot_begin[std::size_t(s) + 1]; ++i)
+      m.m_dof_mass[std::size_t(m_dofs.slot_dof[std::size_t(i)])] += m_dofs.slot_weight[std::size_t(i)] * ms;
+  }
+  return m;
+}
+
 ObjectModel ObjectModel::emptied() const { return next_revision(m_material); }
 
 ObjectModel ObjectModel::next_revision(std::shared_ptr<const MaterialSource> material) const {

@@ -182,6 +182,48 @@ TEST(CutModel, ARevisionWithNothingChangedEqualsItsModelFieldByField) {
   }
 }
 
+TEST(CutModel, NewParamsEqualAModelBuiltWithThem) {
+  // A running object's material edited (the viewer): the same leaves and DOFs, and every quantity that depends on
+  // the parameters as a model built from scratch with the new ones has it.
+  HandleSpec handle;
+  handle.box = {Vec3(-1, -1, -1), Vec3(0.05, 2, 2)};
+  OctreeSpec spec;
+  spec.root = {Vec3(-0.1, -0.1, -0.1), 1.2};
+  spec.base_level = 3;
+  spec.max_level = 6;
+  spec.refine = {{Box3{Vec3(0.5, 0.5, 0), Vec3(0.6, 0.6, 0.1)}, 5}};
+  const auto material = slab([](int, int, int) { return true; });
+  MaterialParams before, after;
+  before.young_modulus = 3e4;
+  before.poisson_ratio = 0.3;
+  after.young_modulus = 7e4;
+  after.poisson_ratio = 0.45;
+  after.density = 1100.0;
+  after.rayleigh_mass = 2.0;
+  after.rayleigh_stiffness = 0.01;
+  const ObjectModel m = ObjectModel::build(spec, material, before, {handle});
+  const ObjectModel edited = m.with_params(after);
+  const ObjectModel fresh = ObjectModel::build(spec, material, after, {handle});
+  EXPECT_EQ(edited.revision(), m.revision() + 1);
+  EXPECT_EQ(edited.tree().leaves(), fresh.tree().leaves());
+  expect_same(edited.dofs(), m.dofs());
+  EXPECT_EQ(edited.params().rayleigh_mass, 2.0);
+  EXPECT_TRUE(edited.unit_stiffness().isApprox(fresh.unit_stiffness(), 1e-14));
+  ASSERT_EQ(edited.stiffness_scale().size(), fresh.stiffness_scale().size());
+  for (std::size_t e = 0; e < fresh.stiffness_scale().size(); ++e)
+    EXPECT_NEAR(edited.stiffness_scale()[e], fresh.stiffness_scale()[e], 1e-12 * fresh.stiffness_scale()[e]);
+  ASSERT_EQ(edited.dof_mass().size(), fresh.dof_mass().size());
+  for (std::size_t d = 0; d < fresh.dof_mass().size(); ++d)
+    EXPECT_NEAR(edited.dof_mass()[d], fresh.dof_mass()[d], 1e-12 * fresh.dof_mass()[d]);
+  EXPECT_EQ(edited.dof_handle(), fresh.dof_handle());
+  // Out of range: refused, the model untouched.
+  for (const auto& bad : {MaterialParams{0.0, 0.3, 1000, 0, 0}, MaterialParams{1e4, 0.5, 1000, 0, 0},
+                          MaterialParams{1e4, 0.3, 0.0, 0, 0}, MaterialParams{1e4, 0.3, 1000, -1, 0},
+                          MaterialParams{1e4, 0.3, 1000, 0, NAN}})
+    EXPECT_THROW((void)m.with_params(bad), std::invalid_argument);
+  EXPECT_EQ(m.params().young_modulus, 3e4);
+}
+
 TEST(CutModel, LeavesThatLoseAllMaterialAreDropped) {
   const ObjectModel m = slab_model();
   // Remove x in [1/4, 1/2) entirely: the two columns of leaves there empty out.

@@ -67,9 +67,11 @@ class Run {
     const bool tty = m_options.progress && isatty(STDERR_FILENO);
     auto last_progress = sim::Clock::now();
     m_loop_start = sim::Clock::now();
-    while (!m_world.done()) {
+    apply_replay_events();
+    while (running()) {
       if (g_interrupted) throw std::runtime_error("interrupted by a signal");
       const StepResult step = m_world.step();
+      apply_replay_events();
       const long i = m_world.steps();
       if (scene.output.surface_every > 0 && i % scene.output.surface_every == 0) {
         char name[32];
@@ -77,7 +79,7 @@ class Run {
         write_file_atomic(m_out / "surfaces" / name, encode_ply_binary(m_world.deformed_surface(), ply_precision()));
       }
       if (m_renderer && i % scene.render.every == 0) render_frame();
-      if (tty && (sim::ms_since(last_progress) > 200.0 || m_world.done())) {
+      if (tty && (sim::ms_since(last_progress) > 200.0 || !running())) {
         last_progress = sim::Clock::now();
         print_progress(step);
       }
@@ -149,12 +151,34 @@ class Run {
     ++m_frame;
   }
 
+  // A replay runs until its last event has been applied and its world has taken the session's end_step steps; a
+  // scene's timeline until its duration.
+  [[nodiscard]] bool running() const {
+    const Session* r = m_options.replay;
+    if (r == nullptr) return !m_world.done();
+    return m_next_event < r->events.size() || m_world.steps() < r->end_step;
+  }
+
+  // The replayed session's events due now: those recorded at the world's current step count. A reset rebuilds the
+  // world from the scene, as the viewer did.
+  void apply_replay_events() {
+    const Session* r = m_options.replay;
+    if (r == nullptr) return;
+    while (m_next_event < r->events.size() && r->events[m_next_event].step == m_world.steps()) {
+      const SessionEvent& e = r->events[m_next_event++];
+      if (e.kind == SessionEventKind::reset)
+        m_world = World(m_world.scene(), WorldOptions{!m_options.no_render, true});
+      else
+        apply_session_event(m_world, e);
+    }
+  }
+
   void print_progress(const StepResult& step) const {
-    std::fprintf(stderr, "\r[octocut] step %ld/%ld  t = %.4f s  %.2f ms/step", m_world.steps(), m_world.total_steps(),
-                 step.t, step.ms);
+    const long total = m_options.replay ? m_options.replay->end_step : m_world.total_steps();
+    std::fprintf(stderr, "\r[octocut] step %ld/%ld  t = %.4f s  %.2f ms/step", m_world.steps(), total, step.t, step.ms);
     if (m_renderer) std::fprintf(stderr, "  frame %ld  %.1f ms/frame", m_frame, m_render_ms.back());
     std::fprintf(stderr, "   ");
-    if (m_world.done()) std::fprintf(stderr, "\n");
+    if (!running()) std::fprintf(stderr, "\n");
   }
 
   World& m_world;
@@ -166,6 +190,7 @@ class Run {
   std::optional<std::chrono::steady_clock::time_point> m_loop_start;  // when the first step began
   std::vector<std::string> m_warnings;
   long m_frame = 0;
+  std::size_t m_next_event = 0;  // the next event of a replayed session
 };
 
 // Writes the report atomically; a failure to write it fails the run.
@@ -189,7 +214,7 @@ RunResult run_scene(const Scene& scene, const RunOptions& options) {
   // Everything that is bad input is found before the output directory is touched.
   std::optional<World> world;
   try {
-    world.emplace(scene, WorldOptions{!options.no_render});
+    world.emplace(scene, WorldOptions{!options.no_render, options.replay != nullptr});
   } catch (const SceneError& e) {
     result.exit_code = 2;
     result.error = e.what();

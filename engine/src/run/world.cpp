@@ -378,6 +378,32 @@ CutSummary World::cut_now(std::size_t tool) {
 
 void World::set_tool_pose(std::size_t tool, const sim::Pose& pose) { m->tools.at(tool).driven = pose; }
 void World::release_tool(std::size_t tool) { m->tools.at(tool).driven.reset(); }
+void World::hold_tool(std::size_t tool) {
+  ToolRuntime& tr = m->tools.at(tool);
+  m->ensure_blade(tool);  // a held tool cuts: a bad blade is bad input now, not at the first cut
+  tr.driven = m->tool_pose(tool, time());
+  const auto first = m->events.begin() + std::ptrdiff_t(m->next_event);
+  m->events.erase(std::remove_if(first, m->events.end(), [&](const CutEvent& e) { return e.tool == tool; }),
+                  m->events.end());
+}
+
+void World::set_material(const Material& material) {
+  sim::MaterialParams p;
+  p.young_modulus = material.young_modulus;
+  p.poisson_ratio = material.poisson_ratio;
+  p.density = material.density;
+  p.rayleigh_mass = material.rayleigh_mass;
+  p.rayleigh_stiffness = material.rayleigh_stiffness;
+  // with_params checks the ranges before anything changes; an object cut away has no model to change.
+  sim::ObjectModel next = m->sim->model().with_params(p);
+  if (!m->sim->empty()) m->sim->set_model(std::move(next));
+  m->scene.object.material = material;
+}
+
+const Material& World::material() const { return m->scene.object.material; }
+
+void World::set_overlays(const OverlaySettings& overlays) { m->scene.render.overlays = overlays; }
+
 sim::Pose World::tool_pose(std::size_t tool) const { return m->tool_pose(tool, time()); }
 
 std::optional<std::size_t> World::tool_index(const std::string& name) const {
@@ -422,6 +448,7 @@ RenderScene World::render_scene() const {
   }
   for (std::size_t i = 0; i < m->tools.size(); ++i) {
     const sim::Pose pose = m->tool_pose(i, t);
+    rs.tool_meshes.push_back(m->tools[i].mesh ? int(rs.meshes.size()) : -1);
     if (m->tools[i].mesh) {
       RenderMesh mesh = *m->tools[i].mesh;
       mesh.model = pose.matrix().cast<float>();

@@ -165,6 +165,53 @@ TEST_F(WorldTest, CutNowCutsWhereAPersonHoldsTheTool) {
   EXPECT_THROW(world.set_tool_pose(7, held), std::out_of_range);
 }
 
+TEST_F(WorldTest, AHeldToolLosesItsTimelineCutsAndStaysWhereItIs) {
+  World world(scene(kCube), WorldOptions{.render = false});
+  for (int i = 0; i < 2; ++i) world.step();
+  const sim::Pose before = world.tool_pose(0);
+  world.hold_tool(0);  // before its cut at 5 ms
+  while (!world.done()) world.step();
+  EXPECT_TRUE(world.report().cuts.empty());
+  EXPECT_TRUE(world.tool_pose(0).position.isApprox(before.position, 0.0));
+  EXPECT_THROW(world.hold_tool(7), std::out_of_range);
+  // A tool without cut events loads its blade only when a person takes it: an open blade is bad input then.
+  write("open.obj", "v 0 0 0\nv 0.001 0 0\nv 0 0.001 0\nf 1 2 3\n");
+  World open(scene(kCube, {"/tools/1/blade=open.obj"}), WorldOptions{.render = false});
+  try {
+    open.hold_tool(1);
+    ADD_FAILURE() << "an open blade was taken in hand";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("/tools/1/blade"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(WorldTest, MaterialEditsApplyFromNowOnAndBadOnesChangeNothing) {
+  // The cube pulled up by its top (a second handle moving 1 mm in 10 ms): a stiffer cube stores more elastic energy.
+  std::string pulled = kCube;
+  const std::string held = R"("handles": [{"box": {"min": [-1, -1, -1], "max": [1, 1, 0.0005]}}])";
+  pulled.replace(pulled.find(held), held.size(),
+                 R"("handles": [{"box": {"min": [-1, -1, -1], "max": [1, 1, 0.0005]}},
+                                {"box": {"min": [-1, -1, 0.0095], "max": [1, 1, 1]},
+                                 "keyframes": [{"t": 0.01, "translation": [0, 0, 0.001], "rotation_deg": [0, 0, 0]}]}])");
+  auto energy = [&](double factor) {
+    World world(scene(pulled, {"/tools/0/cuts=[]"}), WorldOptions{.render = false});
+    Material m = world.material();
+    m.young_modulus *= factor;
+    world.set_material(m);
+    EXPECT_EQ(world.material().young_modulus, m.young_modulus);
+    while (!world.done()) world.step();
+    return world.report().elastic_j;
+  };
+  const double soft = energy(1.0), stiff = energy(2.0);
+  EXPECT_GT(stiff, 1.5 * soft);  // the same imposed displacement, twice the stiffness: about twice the energy
+  World world(scene(kCube), WorldOptions{.render = false});
+  Material bad = world.material();
+  bad.poisson_ratio = 0.5;
+  EXPECT_THROW(world.set_material(bad), std::invalid_argument);
+  EXPECT_EQ(world.material().poisson_ratio, 0.45);
+  EXPECT_EQ(world.simulator().model().params().poisson_ratio, 0.45);
+}
+
 TEST_F(WorldTest, AnObjectCutAwayEntirelyKeepsTimeRunning) {
   // A punch wider than the cube removes everything at t = 5 ms.
   World world(scene(kCube, {"/tools/0/blade/cylinder/radius=0.02", "/tools/0/blade/cylinder/height=0.05"}),

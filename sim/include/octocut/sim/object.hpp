@@ -118,6 +118,12 @@ class ObjectModel {
   /// rebuilt locally. Throws std::out_of_range for a bad index and std::invalid_argument when every leaf would go.
   [[nodiscard]] ObjectModel without_leaves(const std::vector<int>& leaves) const;
 
+  /// A new revision with the same leaves, occupancy and DOFs and new material parameters (E, nu, density, Rayleigh
+  /// damping): the unit stiffness, the stiffness scales and the lumped masses follow them. A viewer edits the
+  /// material of a running object through it. Throws std::invalid_argument for E <= 0, nu outside [0, 0.5),
+  /// density <= 0, negative damping or a non-finite value. `*this` is left untouched.
+  [[nodiscard]] ObjectModel with_params(const MaterialParams& params) const;
+
   /// A new revision without any leaf, for an object cut away entirely: the root, material, parameters, handles and
   /// max level are kept, and the model is empty as a default-constructed one is (no elements, no DOFs).
   [[nodiscard]] ObjectModel emptied() const;

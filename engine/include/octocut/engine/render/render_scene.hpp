@@ -61,6 +61,9 @@ struct RenderScene {
   std::vector<RenderMesh> meshes;   ///< tissue first, then tools and context meshes (any number)
   std::vector<OverlayLines> lines;  ///< drawn over the meshes, depth-tested
   std::vector<OverlayPoints> points;  ///< drawn over the meshes, not depth-tested
+  /// For each tool of the scene, the index of its mesh in `meshes`, or -1 when it has none (the viewer poses the
+  /// tool in the hand itself, at the window's rate). Not used for drawing.
+  std::vector<int> tool_meshes;
 };
 
 /// Most lights a scene may use.

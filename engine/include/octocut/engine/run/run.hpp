@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "octocut/engine/run/report.hpp"
+#include "octocut/engine/run/session.hpp"
 #include "octocut/engine/scene/scene.hpp"
 
 namespace octocut::engine {
@@ -14,6 +15,10 @@ struct RunOptions {
   std::string out_dir = "out";  ///< report.json and outputs go here (created if missing)
   bool no_render = false;       ///< never touch EGL, whatever the scene says
   bool progress = false;        ///< print a progress line to stderr (on a terminal)
+  /// Replay this recorded session (`--replay`, checked against the scene with check_session_scene) instead of the
+  /// scene's timeline: its events at the steps they took effect, until its end_step, whatever the scene's duration.
+  /// The world is built cuttable, as the viewer's was. Null: run the timeline.
+  const Session* replay = nullptr;
 };
 
 /// What a run ended with.

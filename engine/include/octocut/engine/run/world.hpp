@@ -87,10 +87,23 @@ class World {
   void set_tool_pose(std::size_t tool, const sim::Pose& pose);
   /// Gives tool `tool` back to its keyframes.
   void release_tool(std::size_t tool);
+  /// A person takes tool `tool` in hand (the viewer): its cut events still on the timeline are dropped, and it
+  /// stays where it is now until set_tool_pose moves it; everything else keeps its keyframes. Its blade is loaded
+  /// now. Throws std::out_of_range for a bad index, SceneError for a bad blade file.
+  void hold_tool(std::size_t tool);
   /// Where tool `tool` is now (tool coordinates to world).
   [[nodiscard]] sim::Pose tool_pose(std::size_t tool) const;
   /// The index of the tool named `name`, or nullopt.
   [[nodiscard]] std::optional<std::size_t> tool_index(const std::string& name) const;
+
+  /// Changes the object's material from now on (E, nu, density, Rayleigh damping): the model gets a new revision
+  /// with the same leaves and DOFs, the state carries over. Throws std::invalid_argument for values outside the
+  /// scene schema's ranges (E > 0, 0 <= nu < 0.5, density > 0, damping >= 0), leaving the world untouched.
+  void set_material(const Material& material);
+  /// The object's material now (the scene's, or the last set_material).
+  [[nodiscard]] const Material& material() const;
+  /// The debug overlays render_scene() draws from now on (the scene's render.overlays at the start).
+  void set_overlays(const OverlaySettings& overlays);
 
   /// True when this world draws: the scene has render.enabled and WorldOptions::render is set.
   [[nodiscard]] bool renders() const;

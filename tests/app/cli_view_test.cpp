@@ -1,0 +1,267 @@
+// `octocut view` under Xvfb and Mesa llvmpipe, driven by real X events (xdotool): a session in which the mouse moves
+// the punch over the meniscus, a click cuts and Esc closes; the recorded session replays headless to the same cuts;
+// a screenshot after the cut matches a golden image (tolerances as in tests/engine/render/golden_test.cpp) and shows
+// the hole that one before the cut does not; no display is bad input. Each test starts its own Xvfb and kills
+// everything it started, also when it fails.
+//
+// Regenerate the golden screenshot on purpose with OCTOCUT_REGENERATE_GOLDEN=1; review it before committing.
+#include <gtest/gtest.h>
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "common/cli_util.hpp"
+#include "common/temp_dir.hpp"
+#include "common/xvfb.hpp"
+#include "octocut/engine/io/io.hpp"
+#include "octocut/engine/render/camera.hpp"
+#include "octocut/engine/render/frame_writer.hpp"
+#include "octocut/engine/run/session.hpp"
+#include "octocut/engine/scene/scene_loader.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+using namespace std::chrono_literals;
+using Clock = std::chrono::steady_clock;
+using octocut::test::Child;
+using octocut::test::CommandResult;
+using octocut::test::Xvfb;
+using octocut::test::run_octocut;
+
+constexpr int kWidth = 800, kHeight = 450;  // the viewer's window, pixels
+
+json read_json(const fs::path& p) {
+  std::ifstream in(p);
+  return json::parse(in);
+}
+
+std::string read_text(const fs::path& p) {
+  std::ifstream in(p);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+class CliViewTest : public octocut::test::TempDirTest {
+ protected:
+  void SetUp() override {
+    TempDirTest::SetUp();
+    m_xvfb = std::make_unique<Xvfb>(m_dir / "xvfb.log");
+    ASSERT_FALSE(m_xvfb->display().empty()) << "Xvfb did not start: " << read_text(m_dir / "xvfb.log");
+  }
+  void TearDown() override {
+    m_viewer.reset();
+    // A failed test leaves its files (log, session, report, screenshots) in the temp folder for a look.
+    if (HasFailure()) {
+      const fs::path keep = fs::temp_directory_path() / "octocut_view_test_failed";
+      fs::remove_all(keep);
+      fs::copy(m_dir, keep, fs::copy_options::recursive);
+      std::fprintf(stderr, "files of the failed test: %s\n", keep.c_str());
+    }
+    m_xvfb.reset();
+    TempDirTest::TearDown();
+  }
+
+  // Runs xdotool on the test's display (at most 10 s); its output.
+  std::string xdotool(const std::string& arguments) const {
+    const std::string command = "DISPLAY=" + m_xvfb->display() + " timeout 10 xdotool " + arguments + " 2>&1";
+    std::string out;
+    FILE* pipe = popen(command.c_str(), "r");
+    if (pipe == nullptr) return out;
+    char buffer[256];
+    while (std::fgets(buffer, sizeof buffer, pipe)) out += buffer;
+    pclose(pipe);
+    return out;
+  }
+
+  // The viewer's log.
+  [[nodiscard]] std::string log() const { return read_text(m_dir / "view.log"); }
+
+  // The simulated time of the viewer's last status line, s (-1 before the first).
+  [[nodiscard]] double sim_time() const {
+    static const std::regex line(R"(\[view\] t = ([0-9.]+) s)");
+    double t = -1.0;
+    const std::string text = log();
+    for (auto it = std::sregex_iterator(text.begin(), text.end(), line); it != std::sregex_iterator(); ++it)
+      t = std::stod((*it)[1]);
+    return t;
+  }
+
+  // Waits until `ready()` or the deadline; false on the deadline or when the viewer died.
+  template <class F>
+  bool wait_for(F ready, std::chrono::seconds timeout) {
+    const auto end = Clock::now() + timeout;
+    while (Clock::now() < end) {
+      if (ready()) return true;
+      if (m_viewer && !m_viewer->running()) return ready();
+      std::this_thread::sleep_for(50ms);
+    }
+    return false;
+  }
+
+  std::unique_ptr<Xvfb> m_xvfb;
+  std::unique_ptr<Child> m_viewer;
+};
+
+// The pixel (x, y) of an RGB8 image.
+const std::uint8_t* rgb(const octocut::engine::Image& image, int x, int y) {
+  return &image.rgb[3 * (std::size_t(y) * image.width + x)];
+}
+
+// Cut faces: the renderer's fresh-tissue red (0.78, 0.12, 0.10) lit, red well above green and blue; intact tissue is
+// pink (0.86, 0.58, 0.56), the background dark grey (0.08, 0.08, 0.10).
+bool is_cut_face(const std::uint8_t* p) { return p[0] > 60 && p[1] < 0.4 * p[0] && p[2] < 0.4 * p[0]; }
+bool is_tissue(const std::uint8_t* p) { return p[0] > 100 && p[1] > 0.45 * p[0] && p[2] > 0.45 * p[0]; }
+
+// Within `radius` pixels of (cx, cy): the pixels that show cut faces in `after`, and those that showed tissue in
+// `before` and show cut faces or no tissue (the background through the hole) in `after`.
+std::pair<int, int> hole_pixels(const octocut::engine::Image& before, const octocut::engine::Image& after, double cx,
+                                double cy, int radius) {
+  int cut = 0, opened = 0;
+  for (int y = std::max(0, int(cy) - radius); y < std::min(after.height, int(cy) + radius); ++y)
+    for (int x = std::max(0, int(cx) - radius); x < std::min(after.width, int(cx) + radius); ++x) {
+      cut += is_cut_face(rgb(after, x, y));
+      opened += is_tissue(rgb(before, x, y)) && !is_tissue(rgb(after, x, y));
+    }
+  return {cut, opened};
+}
+
+TEST_F(CliViewTest, MouseCutRecordReplayAndScreenshot) {
+  const std::string scene = std::string(OCTOCUT_SOURCE_DIR) + "/assets/scenes/meniscus_punch.json";
+  const fs::path record = m_dir / "s.json", out = m_dir / "o";
+  m_viewer = std::make_unique<Child>(
+      std::vector<std::string>{OCTOCUT_EXE, "view", scene, "--set", "/solver/gravity=[0,0,0]", "--set",
+                               "/render/props=[]", "--set", "/render/camera/arthroscope=false", "--set",
+                               "/render/camera/mask=false", "--set", "/render/camera/position=[0,-0.002,0.045]", "--set",
+                               "/render/camera/target=[0,-0.002,0]", "--set", "/render/camera/up=[0,1,0]", "--set",
+                               "/render/camera/fov_deg=45", "--record", record.string(), "--out", out.string(),
+                               "--size", std::to_string(kWidth) + "x" + std::to_string(kHeight)},
+      std::vector<std::string>{"DISPLAY=" + m_xvfb->display(), "LIBGL_ALWAYS_SOFTWARE=1"}, m_dir / "view.log");
+  // Without gravity the meniscus stays at rest, so that the images do not depend on when they were taken; seen from
+  // above without the knee, so that the hole shows. The overrides are recorded in the session, and the replay
+  // applies them. The window, then its first status line.
+  const std::string window = xdotool("search --sync --onlyvisible --name 'octocut'");
+  ASSERT_FALSE(window.empty()) << log();
+  const std::string id = window.substr(0, window.find('\n'));
+  ASSERT_TRUE(wait_for([&] { return sim_time() >= 0.0; }, 40s)) << log();
+
+  // A point in the middle of the meniscus' right horn, on the screen (clear of the panel): tissue under the mouse.
+  octocut::engine::Camera camera;
+  camera.position = {0.0, -0.002, 0.045};
+  camera.target = {0.0, -0.002, 0.0};
+  camera.up = {0.0, 1.0, 0.0};
+  camera.fov_deg = 45.0;
+  const Eigen::Vector3d punch = octocut::engine::project_to_pixel(camera, kWidth, kHeight, {0.018, 0.0017, 0.002});
+  // --sync: xdotool returns once the pointer has moved, so that the X server has queued the motion before the key or
+  // the click that follows (xdotool's runs are separate clients; a loaded server need not serve them in order).
+  const std::string park = "mousemove --sync --window " + id + " " + std::to_string(kWidth - 20) + " 20";
+  const std::string over = "mousemove --sync --window " + id + " " + std::to_string(int(punch.x())) + " " +
+                           std::to_string(int(punch.y()));
+
+  // Before: the tool parked off the tissue, a screenshot.
+  xdotool(park);
+  std::this_thread::sleep_for(300ms);
+  xdotool("key F12");
+  ASSERT_TRUE(wait_for([&] { return log().find("screenshot_000.png") != std::string::npos; }, 10s)) << log();
+  // The cut: the mouse over the tissue, a click.
+  xdotool(over);
+  std::this_thread::sleep_for(300ms);
+  xdotool("click 1");
+  ASSERT_TRUE(wait_for([&] { return log().find("[view] cut at") != std::string::npos; }, 20s)) << log();
+  // After: the tool parked again, a screenshot; then Esc.
+  xdotool(park);
+  std::this_thread::sleep_for(300ms);
+  xdotool("key F12");
+  ASSERT_TRUE(wait_for([&] { return log().find("screenshot_001.png") != std::string::npos; }, 10s)) << log();
+  xdotool("key Escape");
+  ASSERT_EQ(m_viewer->wait_exit(20s), 0) << log();
+
+  // The session has the cut; the viewer's report has it too.
+  const json session = read_json(record);
+  int recorded_cuts = 0;
+  for (const json& e : session["events"]) recorded_cuts += e["kind"] == "cut";
+  EXPECT_EQ(recorded_cuts, 1) << session.dump();
+  const json viewed = read_json(out / "report.json");
+  ASSERT_EQ(viewed["cuts"].size(), 1u) << viewed["cuts"].dump();
+  EXPECT_EQ(viewed["cuts"][0]["status"], "ok") << viewed["cuts"].dump();
+  EXPECT_GT(viewed["cuts"][0]["removed_volume_m3"].get<double>(), 1e-10);
+
+  // Replayed headless: the same cuts.
+  const CommandResult r = run_octocut("run '" + scene + "' --replay '" + record.string() + "' --no-render --quiet --out '" +
+                                      (m_dir / "replay").string() + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json replayed = read_json(m_dir / "replay" / "report.json");
+  ASSERT_EQ(replayed["cuts"].size(), viewed["cuts"].size());
+  for (std::size_t i = 0; i < viewed["cuts"].size(); ++i) {
+    const json &a = viewed["cuts"][i], &b = replayed["cuts"][i];
+    EXPECT_EQ(a["status"], b["status"]);
+    EXPECT_EQ(a["t"], b["t"]);
+    const double va = a["removed_volume_m3"].get<double>(), vb = b["removed_volume_m3"].get<double>();
+    EXPECT_LE(std::abs(va - vb), 1e-9 * std::abs(va)) << va << " vs " << vb;
+  }
+  EXPECT_EQ(viewed["steps"], replayed["steps"]);
+  EXPECT_EQ(viewed["counts"], replayed["counts"]);
+
+  // The hole: cut faces (red) around the punch after the cut, none before.
+  const auto before = octocut::engine::decode_png(octocut::engine::read_file(out / "screenshot_000.png"), "before");
+  const auto after = octocut::engine::decode_png(octocut::engine::read_file(out / "screenshot_001.png"), "after");
+  ASSERT_EQ(after.width, kWidth);
+  ASSERT_EQ(after.height, kHeight);
+  // The punch (2 mm across, about 24 pixels here) opened the horn: tissue before, cut faces (the walls and the floor
+  // of the hole) or the background through it after.
+  const auto [cut_before, opened_before] = hole_pixels(before, before, punch.x(), punch.y(), 30);
+  const auto [cut_after, opened_after] = hole_pixels(before, after, punch.x(), punch.y(), 30);
+  EXPECT_EQ(cut_before, 0);
+  EXPECT_EQ(opened_before, 0);
+  EXPECT_GT(cut_after, 10);
+  EXPECT_GT(opened_after, 100);
+
+  // The screenshot against the golden image, within the golden tests' tolerances.
+  const fs::path golden_dir = fs::path(OCTOCUT_SOURCE_DIR) / "tests/app/golden";
+  const fs::path golden = golden_dir / "viewer_cut.png", tolerance_file = golden_dir / "viewer_cut.json";
+  if (const char* regen = std::getenv("OCTOCUT_REGENERATE_GOLDEN"); regen != nullptr && std::string(regen) == "1") {
+    fs::create_directories(golden_dir);
+    octocut::engine::write_file_atomic(golden, octocut::engine::read_file(out / "screenshot_001.png"));
+    if (!fs::exists(tolerance_file))
+      octocut::engine::write_file_atomic(tolerance_file, "{\"threshold\": 2, \"max_diff\": 48, \"max_fraction\": 0.01}\n");
+  }
+  const auto reference = octocut::engine::decode_png(octocut::engine::read_file(golden), golden.string());
+  const json tol = json::parse(read_text(tolerance_file));
+  ASSERT_EQ(reference.width, after.width);
+  ASSERT_EQ(reference.height, after.height);
+  int differing = 0, worst = 0;
+  for (std::size_t i = 0; i < after.rgb.size(); i += 3) {
+    int d = 0;
+    for (int k = 0; k < 3; ++k) d = std::max(d, std::abs(int(after.rgb[i + k]) - int(reference.rgb[i + k])));
+    worst = std::max(worst, d);
+    differing += d > tol.at("threshold").get<int>();
+  }
+  EXPECT_LE(worst, tol.at("max_diff").get<int>());
+  EXPECT_LE(double(differing) / double(after.width * after.height), tol.at("max_fraction").get<double>());
+}
+
+TEST(CliViewNoDisplay, ExitsTwoWithAClearMessage) {
+  const std::string scene = std::string(OCTOCUT_SOURCE_DIR) + "/assets/scenes/meniscus_punch.json";
+  const CommandResult r = run_octocut("view '" + scene + "'", "env -u DISPLAY -u WAYLAND_DISPLAY");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("cannot open a window"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("DISPLAY"), std::string::npos) << r.output;
+}
+
+}  // namespace

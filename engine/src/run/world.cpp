@@ -9,6 +9,7 @@
 #include "octocut/cutting/blade.hpp"
 #include "octocut/cutting/cutting.hpp"
 #include "octocut/cutting/mesh_check.hpp"
+#include "octocut/engine/io/mesh_io.hpp"
 #include "octocut/engine/render/camera.hpp"
 #include "octocut/engine/render/render_builder.hpp"
 #include "octocut/engine/run/scene_object.hpp"
@@ -19,6 +20,7 @@
 #include "octocut/sim/primitives.hpp"
 #include "octocut/sim/surface_check.hpp"
 #include "octocut/sim/timing.hpp"
+#include "run/contact_world.hpp"
 
 namespace octocut::engine {
 
@@ -93,6 +95,12 @@ struct World::Impl {
   std::size_t next_event = 0;
   cutting::CutOptions cut_options;
 
+  // Contact (only when the scene collides): the Bullet world and S's collision samples.
+  std::unique_ptr<ContactWorld> contact;
+  sim::ContactSamples samples;
+  double contact_stiffness = 0.0;   // Pa/m
+  double contact_resolution = 0.0;  // m, the finest leaf at the start
+
   EmbeddedSurface box_tissue;  // a box primitive drawn as a finer grid of its faces (its 12 triangles shade flat)
   Camera camera;               // the scene's camera before it follows a tool
 
@@ -106,11 +114,16 @@ struct World::Impl {
   void check_start();
   void ensure_blade(std::size_t tool);
   void update_surface();
+  void build_contact();
+  void refresh_samples();
+  void contact_before_step();
+  void contact_after_step();
   CutSummary cut(std::size_t tool, double t, bool scheduled);
   void run_due_cuts(std::vector<CutSummary>& out);
   [[nodiscard]] sim::Pose tool_pose(std::size_t tool, double t) const;
   void record_counts(Report& r) const;
   void record_state(Report& r) const;
+  void record_contact(Report& r) const;
 };
 
 World::Impl::Impl(const Scene& s, const WorldOptions& o)
@@ -136,6 +149,64 @@ World::Impl::Impl(const Scene& s, const WorldOptions& o)
   sim = std::make_unique<sim::Simulator>(std::move(built.model), simulator_options(scene));
   check_start();
   bind_surface();
+  if (scene_collides(scene)) build_contact();
+}
+
+void World::Impl::build_contact() {
+  // The penalty from E and the finest leaf (unless given), the samples at that resolution, the Bullet world.
+  const sim::ObjectModel& m0 = sim->model();
+  double h = 0.0;
+  for (double e : m0.edge()) h = h == 0.0 ? e : std::min(h, e);
+  if (!(h > 0.0)) h = 1e-3;
+  contact_resolution = h;
+  contact_stiffness =
+      scene.contact.has_stiffness ? scene.contact.stiffness : default_contact_stiffness(scene.object.material.young_modulus, h);
+  std::vector<sim::TriMesh> shapes(scene.tools.size());
+  for (std::size_t i = 0; i < scene.tools.size(); ++i) {
+    const ToolSettings& t = scene.tools[i];
+    if (!t.collide) continue;
+    if (!t.mesh_path.empty()) {
+      try {
+        shapes[i] = load_mesh(t.mesh_path, MeshLoadOptions{t.scale, true, true}).mesh;
+      } catch (const MeshError& e) {
+        throw SceneError(scene.file + ": /tools/" + std::to_string(i) + "/mesh: " + e.what());
+      }
+    } else if (!t.blade_is_cylinder) {
+      ensure_blade(i);
+      shapes[i] = *tools[i].blade;
+    }
+  }
+  contact = std::make_unique<ContactWorld>(scene, shapes, contact_stiffness, 4.0 * h);
+  if (scene.solver.mode == "static")
+    warnings.push_back("/solver/mode: contact acts in dynamic mode only; this static scene ignores it");
+  refresh_samples();
+}
+
+void World::Impl::refresh_samples() {
+  if (!contact) return;
+  if (sim->empty()) samples = sim::ContactSamples{};
+  else samples = sim::build_contact_samples(sim->model(), object.surface, *embedding, contact_resolution);
+  if (samples.begin.empty()) samples.begin.push_back(0);
+  contact->reset_samples();
+}
+
+void World::Impl::contact_before_step() {
+  if (!contact || sim->empty()) return;
+  const double t = sim->state().t, dt = scene.solver.dt;
+  std::vector<sim::Pose> now, next;
+  for (std::size_t i = 0; i < tools.size(); ++i) {
+    now.push_back(tool_pose(i, t));
+    next.push_back(tool_pose(i, t + dt));
+  }
+  sim->set_contacts(contact->find(samples, sim->state().x, sim->state().v, t, dt, now, next));
+}
+
+void World::Impl::contact_after_step() {
+  if (!contact) return;
+  const double dt = scene.solver.dt, t = sim->state().t - dt;
+  std::vector<sim::Pose> next;
+  for (std::size_t i = 0; i < tools.size(); ++i) next.push_back(tool_pose(i, t + dt));
+  contact->finish(sim->contact_outcomes(), t, dt, next);
 }
 
 void World::Impl::load_props() {
@@ -156,9 +227,6 @@ void World::Impl::load_tools() {
     tools.back().keyframes = pose_keyframes(t.keyframes);
     if (!t.cuts.empty()) ensure_blade(i);
     if (rendering && !t.mesh_path.empty()) tools.back().mesh = prop_mesh(load_tool_mesh(scene, i), "metal");
-    if (t.collide)
-      warnings.push_back("/tools/" + std::to_string(i) +
-                         "/collide: tool contact is not implemented yet; the tool passes through tissue");
     for (const ToolCut& c : t.cuts) events.push_back({c.t, i});
   }
   std::stable_sort(events.begin(), events.end(), [](const CutEvent& a, const CutEvent& b) { return a.t < b.t; });
@@ -261,7 +329,10 @@ CutSummary World::Impl::cut(std::size_t i, double t, bool scheduled) {
   if (o.unrestricted > 0)
     warnings.push_back(what + ": the blade also covered other material in rest space, and could not be kept off it (" +
                        std::to_string(o.unrestricted) + " component(s)): it cut all of it");
-  if (o.status == "ok") update_surface();
+  if (o.status == "ok") {
+    update_surface();
+    refresh_samples();  // the new cut faces collide
+  }
   return c;
 }
 
@@ -331,6 +402,26 @@ void World::Impl::record_state(Report& r) const {
     r.warnings.push_back(std::to_string(st.newton_unconverged) + " static solves stopped unconverged");
 }
 
+void World::Impl::record_contact(Report& r) const {
+  if (!contact) return;
+  ContactSummary& c = r.contact;
+  c.present = true;
+  c.max_penetration_m = contact->max_penetration();
+  c.samples = samples.size();
+  c.stiffness_pa_m = contact_stiffness;
+  for (const ColliderState& s : contact->colliders()) {
+    if (s.kind == ColliderState::Kind::tool) c.tools.push_back({s.name, s.max_force, s.force});
+    if (s.kind != ColliderState::Kind::body) continue;
+    // XYZ Euler angles of R = Rz Ry Rx.
+    const sim::Mat3& R = s.pose.rotation;
+    const double deg = 180.0 / M_PI;
+    const std::array<double, 3> angles = {std::atan2(R(2, 1), R(2, 2)) * deg,
+                                          std::asin(std::clamp(-R(2, 0), -1.0, 1.0)) * deg,
+                                          std::atan2(R(1, 0), R(0, 0)) * deg};
+    c.bodies.push_back({s.name, a3(s.pose.position), angles, s.velocity, s.force});
+  }
+}
+
 // ---- World ---------------------------------------------------------------------------------------------------------
 
 World::World(const Scene& scene, const WorldOptions& options) : m(std::make_unique<Impl>(scene, options)) {}
@@ -342,7 +433,9 @@ StepResult World::step() {
   const auto t0 = sim::Clock::now();
   StepResult r;
   m->run_due_cuts(r.cuts);
+  m->contact_before_step();
   m->sim->step();  // an object cut away entirely only advances time (sim::Simulator::remove_object)
+  m->contact_after_step();
   m->update_surface();
   m->run_due_cuts(r.cuts);
   ++m->steps;
@@ -371,6 +464,27 @@ std::optional<std::size_t> World::tool_index(const std::string& name) const {
     if (m->scene.tools[i].name == name) return i;
   return std::nullopt;
 }
+
+bool World::has_contact() const { return m->contact != nullptr; }
+
+std::array<double, 3> World::tool_contact_force(std::size_t tool) const {
+  if (tool >= m->tools.size()) throw std::out_of_range("World::tool_contact_force: no tool " + std::to_string(tool));
+  if (m->contact)
+    for (const ColliderState& c : m->contact->colliders())
+      if (c.kind == ColliderState::Kind::tool && c.index == tool) return c.force;
+  return {0.0, 0.0, 0.0};
+}
+
+std::vector<ContactForce> World::contact_forces() const {
+  std::vector<ContactForce> out;
+  if (!m->contact) return out;
+  for (const ColliderState& c : m->contact->colliders())
+    if (c.kind != ColliderState::Kind::prop)
+      out.push_back({c.name, c.kind == ColliderState::Kind::tool, c.force, c.max_penetration});
+  return out;
+}
+
+double World::rigid_body_energy() const { return m->contact ? m->contact->rigid_energy() : 0.0; }
 
 bool World::renders() const { return m->rendering; }
 
@@ -427,8 +541,10 @@ Report World::report() const {
   r.cuts = m->cuts;
   r.subsystems.cut_index = m->object.grid.grid != nullptr;
   r.subsystems.material_graph = to_string(m->graph_source);
+  r.subsystems.contact = m->contact != nullptr;
   m->record_counts(r);
   m->record_state(r);
+  m->record_contact(r);
   return r;
 }
 

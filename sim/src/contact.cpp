@@ -172,10 +172,12 @@ void add_contact_terms(const std::vector<Contact>& contacts, double dt, const st
           // Free row, prescribed column: to the right-hand side.
           rhs.segment<3>(3 * p.dof) -= B * dv_c.segment<3>(3 * q.dof);
         } else if (!add_block(A, p.dof, q.dof, B)) {
-          // Outside the pattern: lump onto the diagonal (adds B (e_p - e_q)(e_p - e_q)^T / 2 >= 0 to the exact
-          // term for this pair, so A stays symmetric positive definite).
-          add_block(A, p.dof, p.dof, 0.5 * B);
-          add_block(A, q.dof, q.dof, 0.5 * B);
+          // Outside the pattern (a row that spans leaves, as a vertex outside every leaf has): lump onto the two
+          // diagonals with |w_p w_q|. With the mirrored pair this adds |w_p w_q| (e_p -+ e_q)(e_p -+ e_q)^T (x) S
+          // >= 0 to the exact term, so A stays symmetric positive definite whatever the weights' signs.
+          const Mat3 L = (0.5 * std::abs(p.weight * q.weight)) * S;
+          add_block(A, p.dof, p.dof, L);
+          add_block(A, q.dof, q.dof, L);
         }
       }
     }

@@ -52,6 +52,13 @@ struct ContactForce {
   double max_penetration_m = 0.0;        ///< deepest sample in it at the start of the last step, m
 };
 
+/// Where the contact time of the last step went, ms.
+struct ContactTiming {
+  double queries = 0.0;  ///< sample positions, the bounding-box prefilter and Bullet's distance queries
+  double terms = 0.0;    ///< the contact terms added to the implicit system and their forces afterwards
+  double rigid = 0.0;    ///< forces onto the bodies and Bullet's step
+};
+
 /// True when every DOF position and velocity of `state` is finite.
 bool state_finite(const sim::SimState& state);
 
@@ -108,6 +115,8 @@ class World {
   /// The contact force on every colliding tool and rigid body after the last step (tools first, in scene order);
   /// empty without contact.
   [[nodiscard]] std::vector<ContactForce> contact_forces() const;
+  /// Where the contact time of the last step went (zero without contact).
+  [[nodiscard]] ContactTiming contact_timing() const;
   /// Kinetic plus gravitational potential energy of the dynamic rigid bodies (potential zero at the world origin),
   /// J; 0 without any.
   [[nodiscard]] double rigid_body_energy() const;

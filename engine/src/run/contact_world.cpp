@@ -76,6 +76,7 @@ struct Collider {
   Vec3 torque = Vec3::Zero();                     // about its centre of mass, N m
   std::vector<Vec3> cache_local;                  // per sample: local position at its last query, m
   std::vector<double> cache_clearance;            // per sample: distance known free of the surface there, m
+  std::vector<double> last_depth;                 // per sample: its penetration at the last query, m (0: none)
 };
 
 // The nearest triangle of a concave mesh to a local point, through Bullet's BVH and GJK.
@@ -308,6 +309,7 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
   if (c.cache_local.size() != std::size_t(n)) {
     c.cache_local.assign(std::size_t(n), Vec3::Zero());
     c.cache_clearance.assign(std::size_t(n), -1.0);
+    c.last_depth.assign(std::size_t(n), 0.0);
   }
   const btVector3 com = c.dynamic ? c.body->getCenterOfMassPosition() : btVector3(0, 0, 0);
   for (int i = 0; i < n; ++i) {
@@ -319,8 +321,11 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
     double& clearance = c.cache_clearance[std::size_t(i)];
     if (clearance > 0.0 && (local - c.cache_local[std::size_t(i)]).norm() < clearance) continue;
     Vec3 normal = Vec3::UnitZ();
-    const double d = signed_distance(c, tr, p, depth, normal, clearance);
+    // A sample already inside a triangle mesh is followed with a deeper search, so that a tool pressing on keeps it.
+    double& last = c.last_depth[std::size_t(i)];
+    const double d = signed_distance(c, tr, p, std::max(depth, 2.0 * last), normal, clearance);
     c.cache_local[std::size_t(i)] = local;
+    last = d < 0.0 ? -d : 0.0;
     if (!(d < 0.0)) continue;
     sim::Contact k;
     k.dofs.assign(samples.dofs.begin() + samples.begin[std::size_t(i)],
@@ -399,6 +404,7 @@ void ContactWorld::reset_samples() {
   for (Collider& c : m->colliders) {
     c.cache_local.clear();
     c.cache_clearance.clear();
+    c.last_depth.clear();
   }
 }
 

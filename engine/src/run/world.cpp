@@ -101,6 +101,8 @@ struct World::Impl {
   double contact_stiffness = 0.0;   // Pa/m
   double contact_resolution = 0.0;  // m, the finest leaf at the start
 
+  std::vector<std::optional<RenderMesh>> body_meshes;  // per rigid body when drawn (body frame)
+
   EmbeddedSurface box_tissue;  // a box primitive drawn as a finer grid of its faces (its 12 triangles shade flat)
   Camera camera;               // the scene's camera before it follows a tool
 
@@ -115,6 +117,7 @@ struct World::Impl {
   void ensure_blade(std::size_t tool);
   void update_surface();
   void build_contact();
+  void load_body_meshes();
   void refresh_samples();
   void contact_before_step();
   void contact_after_step();
@@ -179,9 +182,56 @@ void World::Impl::build_contact() {
   // Triangle meshes are searched within h / 2 of each sample: deeper penetrations than that are not expected with the
   // penalty in the implicit system, and a small box keeps the BVH queries cheap.
   contact = std::make_unique<ContactWorld>(scene, shapes, contact_stiffness, 0.5 * h);
+  if (rendering) load_body_meshes();
   if (scene.solver.mode == "static")
     warnings.push_back("/solver/mode: contact acts in dynamic mode only; this static scene ignores it");
   refresh_samples();
+}
+
+namespace {
+// A UV sphere of `radius` about the origin, m (for drawing).
+sim::TriMesh sphere_mesh(double radius, int segments, int rings) {
+  sim::TriMesh m;
+  m.vertices.push_back({0, 0, -radius});
+  for (int r = 1; r < rings; ++r) {
+    const double phi = M_PI * r / rings - M_PI / 2;
+    for (int k = 0; k < segments; ++k) {
+      const double th = 2 * M_PI * k / segments;
+      m.vertices.push_back(radius * sim::Vec3(std::cos(phi) * std::cos(th), std::cos(phi) * std::sin(th), std::sin(phi)));
+    }
+  }
+  m.vertices.push_back({0, 0, radius});
+  const int top = int(m.vertices.size()) - 1;
+  auto at = [&](int r, int k) { return 1 + (r - 1) * segments + (k % segments); };
+  for (int k = 0; k < segments; ++k) {
+    m.triangles.push_back({0, at(1, k + 1), at(1, k)});
+    m.triangles.push_back({top, at(rings - 1, k), at(rings - 1, k + 1)});
+    for (int r = 1; r + 1 < rings; ++r) {
+      m.triangles.push_back({at(r, k), at(r, k + 1), at(r + 1, k + 1)});
+      m.triangles.push_back({at(r, k), at(r + 1, k + 1), at(r + 1, k)});
+    }
+  }
+  return m;
+}
+}  // namespace
+
+void World::Impl::load_body_meshes() {
+  // What each rigid body looks like: its shape in the body frame; glass is drawn as metal (no glass shading yet).
+  for (std::size_t i = 0; i < scene.rigid_bodies.size(); ++i) {
+    const RigidBodySettings& b = scene.rigid_bodies[i];
+    body_meshes.emplace_back();
+    if (b.render == "none") continue;
+    const RigidShape& sh = b.shape;
+    sim::TriMesh mesh;
+    if (sh.kind == "sphere") mesh = sphere_mesh(sh.radius, 48, 24);
+    if (sh.kind == "cylinder") mesh = sim::cylinder_mesh(sh.radius, sh.height, 64);
+    if (sh.kind == "box") {
+      const sim::Vec3 half = 0.5 * to_vec3(sh.size);
+      mesh = sim::box_face_grids({-half, half}, 1);
+    }
+    if (sh.kind == "mesh") mesh = load_mesh(sh.mesh_path, MeshLoadOptions{sh.scale, false, false}).mesh;
+    body_meshes.back() = prop_mesh(mesh, b.render == "bone" ? "bone" : "metal");
+  }
 }
 
 void World::Impl::refresh_samples() {
@@ -524,6 +574,14 @@ RenderScene World::render_scene() const {
     mesh.model = pose.matrix().cast<float>();
     rs.meshes.push_back(std::move(mesh));
     if (scene.render.props[i].name == scene.render.camera.follow_tool) follow_tool(rs.camera, pose.position);
+  }
+  if (m->contact) {
+    for (const ColliderState& c : m->contact->colliders()) {
+      if (c.kind != ColliderState::Kind::body || c.index >= m->body_meshes.size() || !m->body_meshes[c.index]) continue;
+      RenderMesh mesh = *m->body_meshes[c.index];
+      mesh.model = c.pose.matrix().cast<float>();
+      rs.meshes.push_back(std::move(mesh));
+    }
   }
   for (std::size_t i = 0; i < m->tools.size(); ++i) {
     const sim::Pose pose = m->tool_pose(i, t);

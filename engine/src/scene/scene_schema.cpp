@@ -186,7 +186,8 @@ Entry make_rigid_bodies() {
                     "Pose over time of a kinematic body (only allowed with `motion` = `kinematic`, at least one): "
                     "position linear, rotation spherical-linear, held before the first and after the last."),
        std::move(friction),
-       choice("render", {"metal", "bone", "glass", "none"}, "metal", "How the body is drawn.")},
+       choice("render", {"metal", "bone", "glass", "none"}, "metal",
+              "How the body is drawn (its shape, at its pose); `glass` is shaded as metal for now; `none`: not drawn.")},
       "Rigid bodies (Bullet) that collide with the tissue.");
 }
 

@@ -197,6 +197,22 @@ TEST_F(ContactTest, CuttingWhileABodyPressesStaysFiniteAndTheCutFacesCollide) {
   EXPECT_EQ(r.failed_steps, 0);
 }
 
+TEST_F(ContactTest, RigidBodiesAreDrawnAtTheirPose) {
+  // The block on its floor, rendered (the description only; no GL): the floor is drawn, a box at (0, 0, -0.01).
+  World world(scene(kBlock, {"/render/enabled=true", "/duration=0.004"}), WorldOptions{.render = true});
+  world.step();
+  const RenderScene rs = world.render_scene();
+  ASSERT_EQ(rs.meshes.size(), 2u);  // the tissue and the floor
+  const RenderMesh& floor = rs.meshes[1];
+  EXPECT_NEAR(floor.model(2, 3), -0.01, 1e-6);
+  float zmin = 1e9f, zmax = -1e9f;
+  for (const auto& p : floor.positions) {
+    zmin = std::min(zmin, p.z());
+    zmax = std::max(zmax, p.z());
+  }
+  EXPECT_NEAR(zmax - zmin, 0.02, 1e-6);  // the box's height, in the body frame
+}
+
 TEST_F(ContactTest, ASceneInWhichNothingCollidesBuildsNoBulletWorld) {
   const char* text = R"({"duration": 0.002, "solver": {"dt": 0.001},
     "object": {"surface": {"box": {"min": [0, 0, 0], "max": [0.01, 0.01, 0.01]}}, "octree": {"base_level": 1}},

@@ -106,5 +106,37 @@ TEST(ContactTerm, APenaltyFarTooStiffForAnExplicitStepIsStable) {
   EXPECT_LT(deepest, 1e-6);
 }
 
+TEST(ContactTerm, AContactThatBlowsUpIsRolledBackAndCounted) {
+  // Every sample of the block 5 mm deep in a 1e12 Pa/m penalty: the step would fling it off far above the speed
+  // guard, so the attempt is rejected, retried with halved steps (each half from the penetration the last left),
+  // and counted; the state stays finite.
+  const ObjectModel m = test::box_model(kBox, Vec3(0, 0, 0), 0.01, 2, {}, {}, soft());
+  const TriMesh s = box_face_grids(kBox, 2);
+  const SurfaceEmbedding e(m, s);
+  const ContactSamples samples = build_contact_samples(m, s, e, 0.0025);
+  SimulatorOptions o;
+  o.dt = 0.002;
+  o.threads = 1;
+  o.linear_solver = "cholmod";
+  o.max_speed = 1.0;
+  Simulator sim(m, o);
+  std::vector<Contact> contacts;
+  for (int i = 0; i < samples.size(); ++i) {
+    Contact c;
+    c.dofs.assign(samples.dofs.begin() + samples.begin[std::size_t(i)],
+                  samples.dofs.begin() + samples.begin[std::size_t(i) + 1]);
+    c.normal = Vec3::UnitZ();
+    c.penetration = 0.005;
+    c.stiffness = 1e12 * samples.area[std::size_t(i)];
+    contacts.push_back(std::move(c));
+  }
+  sim.set_contacts(contacts);
+  sim.step();
+  EXPECT_GT(sim.stats().speed_limit, 0);
+  EXPECT_EQ(sim.stats().recoveries + sim.stats().failed_steps, 1);
+  for (const Vec3& v : sim.state().v) EXPECT_TRUE(v.allFinite());
+  EXPECT_NEAR(sim.state().t, 0.002, 1e-15);
+}
+
 }  // namespace
 }  // namespace octocut::sim

@@ -64,7 +64,7 @@ if(PROJECT_IS_TOP_LEVEL)
   # libraries come with them, and so cover bin/octocut.
   set(_octocut_deb_depends
       cmake libeigen3-dev libcgal-dev libgmp-dev libmpfr-dev libsuitesparse-dev libtbb-dev libassimp-dev
-      libpng-dev nlohmann-json3-dev)
+      libpng-dev nlohmann-json3-dev pkg-config libbullet-dev)
   if(OCTOCUT_HAVE_EGL)
     list(APPEND _octocut_deb_depends pkg-config libepoxy-dev)
     set(CPACK_DEBIAN_PACKAGE_RECOMMENDS "libegl-mesa0, libgl1-mesa-dri, libopenblas0-pthread")

@@ -198,9 +198,12 @@ bool Simulator::solve_increment(double dt, const VecX& dv_c, VecX& dv) {
   VecX coupling;
   m_fem->assemble_system(1.0 + dt * alpha, dt * beta + dt * dt, frame, m_constrained, dv_c, m_A, coupling);
   rhs -= coupling;
+  m_profile.assembly = lap(t0);
+  // Contact: penalty stiffness and damping in the system matrix, so stiff contact is stable at dt.
+  if (!m_contacts.empty()) add_contact_terms(m_contacts, dt, m_state.v, m_constrained, dv_c, m_A, rhs);
   for (int d = 0; d < nd; ++d)
     if (m_constrained[std::size_t(d)]) rhs.segment<3>(3 * d) = dv_c.segment<3>(3 * d);
-  m_profile.assembly = lap(t0);
+  m_profile.contact = lap(t0);
 
   // Solve, warm-started from the last increment.
   analyze_if_needed();
@@ -252,7 +255,16 @@ bool Simulator::try_dynamic_step(double dt) {
   std::vector<Vec3> target;  // handle DOFs' positions at t + dt (num_dofs)
   const VecX dv_c = prescribed_increments(dt, target);
   VecX dv;
-  return solve_increment(dt, dv_c, dv) && commit_step(dt, dv, target);
+  const std::vector<Vec3> v0 = m_contacts.empty() ? std::vector<Vec3>() : m_state.v;
+  if (!solve_increment(dt, dv_c, dv) || !commit_step(dt, dv, target)) return false;
+  if (!m_contacts.empty()) {
+    // The forces of this (part of the) step, and where the next part starts from.
+    const auto t0 = Clock::now();
+    m_outcomes = sim::contact_outcomes(m_contacts, dt, v0, dv);
+    for (std::size_t i = 0; i < m_contacts.size(); ++i) m_contacts[i].penetration = m_outcomes[i].penetration;
+    m_profile.contact += ms_since(t0);
+  }
+  return true;
 }
 
 void Simulator::reset_failed_step(const SimState& start) {
@@ -268,8 +280,10 @@ void Simulator::reset_failed_step(const SimState& start) {
 
 void Simulator::step() {
   const double dt = m_options.dt;
+  m_outcomes.clear();
   if (empty()) {
     m_state.t += dt;  // nothing to simulate; time still runs
+    m_contacts.clear();
     return;
   }
   if (!m_options.dynamic) {
@@ -288,10 +302,13 @@ void Simulator::step() {
     return advance(0.5 * h, depth + 1) && advance(0.5 * h, depth + 1);
   };
   const int failures_before = m_stats.nonfinite + m_stats.speed_limit + m_stats.solver_failures;
-  if (advance(dt, 0)) {
+  const bool ok = advance(dt, 0);
+  m_contacts.clear();  // found anew by the caller for the next step
+  if (ok) {
     if (m_stats.nonfinite + m_stats.speed_limit + m_stats.solver_failures > failures_before) ++m_stats.recoveries;
     return;
   }
+  m_outcomes.clear();
   reset_failed_step(start);
 }
 

@@ -522,6 +522,45 @@ std::vector<BenchOutput> bench_latency(const std::string& scene_name) {
   return {b};
 }
 
+// Median step time of the first second of meniscus_punch, as shipped (the punch colliding, the bones static
+// colliders) and with nothing colliding, and where the contact run's time goes.
+std::vector<BenchOutput> bench_contact() {
+  const std::string file = asset_path("scenes/meniscus_punch.json");
+  const std::vector<std::string> base = {"/duration=1.0"};
+  std::vector<std::string> off = base;
+  for (const char* k : {"/tools/0/collide=false", "/render/props/0/collide=false", "/render/props/1/collide=false"})
+    off.push_back(k);
+  auto run = [&](const std::vector<std::string>& sets, json& parts) {
+    World world(load_scene(file, sets), WorldOptions{false});
+    std::vector<double> step, queries, terms, rigid, assembly, solve;
+    while (!world.done()) {
+      step.push_back(world.step().ms);
+      const ContactTiming c = world.contact_timing();
+      queries.push_back(c.queries);
+      terms.push_back(c.terms);
+      rigid.push_back(c.rigid);
+      assembly.push_back(world.simulator().profile().assembly);
+      solve.push_back(world.simulator().profile().solve);
+    }
+    parts = {{"queries_ms", median_of(queries)}, {"contact_terms_ms", median_of(terms)},
+             {"rigid_ms", median_of(rigid)}, {"assembly_ms", median_of(assembly)}, {"solve_ms", median_of(solve)}};
+    return std::make_pair(TimingSummary::of(step), long(step.size()));
+  };
+  json parts_off, parts_on;
+  const auto [without, n] = run(off, parts_off);
+  const auto [with, n_on] = run(base, parts_on);
+  BenchOutput b;
+  b.name = "contact/meniscus_punch";
+  b.runs = n_on;
+  b.ms = with;
+  b.params = {{"scene", "assets/scenes/meniscus_punch.json"}, {"duration_s", 1.0},
+              {"threads", int(std::thread::hardware_concurrency())}};
+  b.metrics = {{"median_step_ms", with.median}, {"median_step_without_contact_ms", without.median},
+               {"overhead", with.median / without.median - 1.0}, {"with_contact", parts_on},
+               {"without_contact", parts_off}};
+  return {b};
+}
+
 struct Entry {
   std::string name;
   std::function<std::vector<BenchOutput>()> run;
@@ -549,7 +588,8 @@ std::vector<Entry> registry() {
            [] { return bench_scene_step("step/meniscus_l6", "meniscus_rest", {"/object/octree/base_level=6"}); }},
           {"scaling", [] { return bench_scaling(); }},
           {"latency/meniscus_punch", [] { return bench_latency("meniscus_punch"); }},
-          {"latency/meniscus_punch_hd", [] { return bench_latency("meniscus_punch_hd"); }}};
+          {"latency/meniscus_punch_hd", [] { return bench_latency("meniscus_punch_hd"); }},
+          {"contact/meniscus_punch", [] { return bench_contact(); }}};
 }
 
 std::string cpu_name() {

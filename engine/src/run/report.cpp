@@ -77,6 +77,23 @@ std::string report_json(const Report& r) {
   nlohmann::ordered_json probes = nlohmann::ordered_json::object();
   for (const ProbeResult& p : r.probes) probes[p.name] = {{"rest", vec(p.rest)}, {"displacement", vec(p.displacement)}};
   j["probes"] = probes;
+  if (r.contact.present) {
+    ojson tools = ojson::object(), bodies = ojson::object();
+    for (const ToolContactSummary& t : r.contact.tools)
+      tools[t.name] = {{"force_n", {{"max", num(t.max_force_n)}, {"final", vec(t.final_force_n)}}}};
+    for (const BodyContactSummary& b : r.contact.bodies)
+      bodies[b.name] = {{"position", vec(b.position)},
+                        {"rotation_deg", vec(b.rotation_deg)},
+                        {"velocity_m_s", vec(b.velocity_m_s)},
+                        {"force_n", vec(b.force_n)}};
+    j["contact"] = {{"max_penetration_m", num(r.contact.max_penetration_m)},
+                    {"samples", r.contact.samples},
+                    {"stiffness_pa_m", num(r.contact.stiffness_pa_m)},
+                    {"tools", tools},
+                    {"bodies", bodies}};
+  } else {
+    j["contact"] = nullptr;
+  }
   j["stability"] = {{"finite", r.finite},
                     {"recoveries", r.recoveries},
                     {"failed_steps", r.failed_steps},

@@ -79,6 +79,7 @@ class Run {
         write_file_atomic(m_out / "surfaces" / name, encode_ply_binary(m_world.deformed_surface(), ply_precision()));
       }
       if (m_renderer && i % scene.render.every == 0) render_frame();
+      if (scene.output.contact_forces) append_contact_rows(step.t);
       if (tty && (sim::ms_since(last_progress) > 200.0 || !running())) {
         last_progress = sim::Clock::now();
         print_progress(step);
@@ -89,6 +90,9 @@ class Run {
       write_file_atomic(m_out / "surface_final.ply", encode_ply_binary(m_world.deformed_surface(), ply_precision()));
       write_file_atomic(m_out / "surface_rest_final.ply", encode_ply_binary(m_world.rest_surface(), ply_precision()));
     }
+    if (scene.output.contact_forces)
+      write_file_atomic(m_out / "contact_forces.csv",
+                        m_contact_csv.empty() ? std::string("t,name,fx,fy,fz,max_penetration_m\n") : m_contact_csv);
     // Every queued frame is on disk before the run counts as done.
     if (m_writer) m_writer->finish();
   }
@@ -123,6 +127,19 @@ class Run {
  private:
   [[nodiscard]] PlyPrecision ply_precision() const {
     return m_world.scene().output.ply_float ? PlyPrecision::single : PlyPrecision::double_;
+  }
+
+  // One contact_forces.csv row per colliding tool and rigid body after the step that ended at t.
+  void append_contact_rows(double t) {
+    if (m_contact_csv.empty()) m_contact_csv = "t,name,fx,fy,fz,max_penetration_m\n";
+    for (const ContactForce& f : m_world.contact_forces()) {
+      char row[256];
+      std::snprintf(row, sizeof row, ",%.17g,%.17g,%.17g,%.17g\n", f.force_n[0], f.force_n[1], f.force_n[2],
+                    f.max_penetration_m);
+      char time[40];
+      std::snprintf(time, sizeof time, "%.17g,", t);
+      m_contact_csv += time + f.name + row;
+    }
   }
 
   // The files written before the first step: S at rest, the surfaces folder, the frame writer.
@@ -182,6 +199,7 @@ class Run {
   }
 
   World& m_world;
+  std::string m_contact_csv;  // contact_forces.csv so far
   const RunOptions& m_options;
   fs::path m_out;
   std::unique_ptr<Renderer> m_renderer;

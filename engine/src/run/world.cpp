@@ -9,6 +9,7 @@
 #include "octocut/cutting/blade.hpp"
 #include "octocut/cutting/cutting.hpp"
 #include "octocut/cutting/mesh_check.hpp"
+#include "octocut/engine/io/mesh_io.hpp"
 #include "octocut/engine/render/camera.hpp"
 #include "octocut/engine/render/crease.hpp"
 #include "octocut/engine/render/render_builder.hpp"
@@ -20,6 +21,7 @@
 #include "octocut/sim/primitives.hpp"
 #include "octocut/sim/surface_check.hpp"
 #include "octocut/sim/timing.hpp"
+#include "run/contact_world.hpp"
 
 namespace octocut::engine {
 
@@ -99,6 +101,14 @@ struct World::Impl {
   std::size_t next_event = 0;
   cutting::CutOptions cut_options;
 
+  // Contact (only when the scene collides): the Bullet world and S's collision samples.
+  std::unique_ptr<ContactWorld> contact;
+  sim::ContactSamples samples;
+  double contact_stiffness = 0.0;   // Pa/m
+  double contact_resolution = 0.0;  // m, the finest leaf at the start
+
+  std::vector<std::optional<RenderMesh>> body_meshes;  // per rigid body when drawn (body frame)
+
   EmbeddedSurface box_tissue;  // a box primitive drawn as a finer grid of its faces (its 12 triangles shade flat)
   Camera camera;               // the scene's camera before it follows a tool
 
@@ -112,11 +122,17 @@ struct World::Impl {
   void check_start();
   void ensure_blade(std::size_t tool);
   void update_surface();
+  void build_contact();
+  void load_body_meshes();
+  void refresh_samples();
+  void contact_before_step();
+  void contact_after_step();
   CutSummary cut(std::size_t tool, double t, bool scheduled);
   void run_due_cuts(std::vector<CutSummary>& out);
   [[nodiscard]] sim::Pose tool_pose(std::size_t tool, double t) const;
   void record_counts(Report& r) const;
   void record_state(Report& r) const;
+  void record_contact(Report& r) const;
 };
 
 World::Impl::Impl(const Scene& s, const WorldOptions& o)
@@ -142,6 +158,113 @@ World::Impl::Impl(const Scene& s, const WorldOptions& o)
   sim = std::make_unique<sim::Simulator>(std::move(built.model), simulator_options(scene));
   check_start();
   bind_surface();
+  if (scene_collides(scene)) build_contact();
+}
+
+void World::Impl::build_contact() {
+  // The penalty from E and the finest leaf (unless given), the samples at that resolution, the Bullet world.
+  const sim::ObjectModel& m0 = sim->model();
+  double h = 0.0;
+  for (double e : m0.edge()) h = h == 0.0 ? e : std::min(h, e);
+  if (!(h > 0.0)) h = 1e-3;
+  contact_resolution = h;
+  contact_stiffness =
+      scene.contact.has_stiffness ? scene.contact.stiffness : default_contact_stiffness(scene.object.material.young_modulus, h);
+  std::vector<sim::TriMesh> shapes(scene.tools.size());
+  for (std::size_t i = 0; i < scene.tools.size(); ++i) {
+    const ToolSettings& t = scene.tools[i];
+    if (!t.collide) continue;
+    if (!t.mesh_path.empty()) {
+      try {
+        shapes[i] = load_mesh(t.mesh_path, MeshLoadOptions{t.scale, true, true}).mesh;
+      } catch (const MeshError& e) {
+        throw SceneError(scene.file + ": /tools/" + std::to_string(i) + "/mesh: " + e.what());
+      }
+    } else if (!t.blade_is_cylinder) {
+      ensure_blade(i);
+      shapes[i] = *tools[i].blade;
+    }
+  }
+  // Triangle meshes are searched within h / 2 of each sample: deeper penetrations than that are not expected with the
+  // penalty in the implicit system, and a small box keeps the BVH queries cheap.
+  contact = std::make_unique<ContactWorld>(scene, shapes, contact_stiffness, 0.5 * h);
+  if (rendering) load_body_meshes();
+  if (scene.solver.mode == "static")
+    warnings.push_back("/solver/mode: contact acts in dynamic mode only; this static scene ignores it");
+  refresh_samples();
+}
+
+namespace {
+// A UV sphere of `radius` about the origin, m (for drawing).
+sim::TriMesh sphere_mesh(double radius, int segments, int rings) {
+  sim::TriMesh m;
+  m.vertices.push_back({0, 0, -radius});
+  for (int r = 1; r < rings; ++r) {
+    const double phi = M_PI * r / rings - M_PI / 2;
+    for (int k = 0; k < segments; ++k) {
+      const double th = 2 * M_PI * k / segments;
+      m.vertices.push_back(radius * sim::Vec3(std::cos(phi) * std::cos(th), std::cos(phi) * std::sin(th), std::sin(phi)));
+    }
+  }
+  m.vertices.push_back({0, 0, radius});
+  const int top = int(m.vertices.size()) - 1;
+  auto at = [&](int r, int k) { return 1 + (r - 1) * segments + (k % segments); };
+  for (int k = 0; k < segments; ++k) {
+    m.triangles.push_back({0, at(1, k + 1), at(1, k)});
+    m.triangles.push_back({top, at(rings - 1, k), at(rings - 1, k + 1)});
+    for (int r = 1; r + 1 < rings; ++r) {
+      m.triangles.push_back({at(r, k), at(r, k + 1), at(r + 1, k + 1)});
+      m.triangles.push_back({at(r, k), at(r + 1, k + 1), at(r + 1, k)});
+    }
+  }
+  return m;
+}
+}  // namespace
+
+void World::Impl::load_body_meshes() {
+  // What each rigid body looks like: its shape in the body frame; glass is drawn as metal (no glass shading yet).
+  for (std::size_t i = 0; i < scene.rigid_bodies.size(); ++i) {
+    const RigidBodySettings& b = scene.rigid_bodies[i];
+    body_meshes.emplace_back();
+    if (b.render == "none") continue;
+    const RigidShape& sh = b.shape;
+    sim::TriMesh mesh;
+    if (sh.kind == "sphere") mesh = sphere_mesh(sh.radius, 48, 24);
+    if (sh.kind == "cylinder") mesh = sim::cylinder_mesh(sh.radius, sh.height, 64);
+    if (sh.kind == "box") {
+      const sim::Vec3 half = 0.5 * to_vec3(sh.size);
+      mesh = sim::box_face_grids({-half, half}, 1);
+    }
+    if (sh.kind == "mesh") mesh = load_mesh(sh.mesh_path, MeshLoadOptions{sh.scale, false, false}).mesh;
+    body_meshes.back() = prop_mesh(mesh, b.render == "bone" ? "bone" : "metal");
+  }
+}
+
+void World::Impl::refresh_samples() {
+  if (!contact) return;
+  if (sim->empty()) samples = sim::ContactSamples{};
+  else samples = sim::build_contact_samples(sim->model(), object.surface, *embedding, contact_resolution);
+  if (samples.begin.empty()) samples.begin.push_back(0);
+  contact->reset_samples();
+}
+
+void World::Impl::contact_before_step() {
+  if (!contact || sim->empty()) return;
+  const double t = sim->state().t, dt = scene.solver.dt;
+  std::vector<sim::Pose> now, next;
+  for (std::size_t i = 0; i < tools.size(); ++i) {
+    now.push_back(tool_pose(i, t));
+    next.push_back(tool_pose(i, t + dt));
+  }
+  sim->set_contacts(contact->find(samples, sim->state().x, sim->state().v, t, dt, now, next));
+}
+
+void World::Impl::contact_after_step() {
+  if (!contact) return;
+  const double dt = scene.solver.dt, t = sim->state().t - dt;
+  std::vector<sim::Pose> next;
+  for (std::size_t i = 0; i < tools.size(); ++i) next.push_back(tool_pose(i, t + dt));
+  contact->finish(sim->contact_outcomes(), t, dt, next);
 }
 
 void World::Impl::load_props() {
@@ -162,9 +285,6 @@ void World::Impl::load_tools() {
     tools.back().keyframes = pose_keyframes(t.keyframes);
     if (!t.cuts.empty()) ensure_blade(i);
     if (rendering && !t.mesh_path.empty()) tools.back().mesh = prop_mesh(load_tool_mesh(scene, i), "metal");
-    if (t.collide)
-      warnings.push_back("/tools/" + std::to_string(i) +
-                         "/collide: tool contact is not implemented yet; the tool passes through tissue");
     for (const ToolCut& c : t.cuts) events.push_back({c.t, i});
   }
   std::stable_sort(events.begin(), events.end(), [](const CutEvent& a, const CutEvent& b) { return a.t < b.t; });
@@ -270,6 +390,7 @@ CutSummary World::Impl::cut(std::size_t i, double t, bool scheduled) {
   if (o.status == "ok") {
     ++surface_revision;
     update_surface();
+    refresh_samples();  // the new cut faces collide
   }
   return c;
 }
@@ -340,6 +461,26 @@ void World::Impl::record_state(Report& r) const {
     r.warnings.push_back(std::to_string(st.newton_unconverged) + " static solves stopped unconverged");
 }
 
+void World::Impl::record_contact(Report& r) const {
+  if (!contact) return;
+  ContactSummary& c = r.contact;
+  c.present = true;
+  c.max_penetration_m = contact->max_penetration();
+  c.samples = samples.size();
+  c.stiffness_pa_m = contact_stiffness;
+  for (const ColliderState& s : contact->colliders()) {
+    if (s.kind == ColliderState::Kind::tool) c.tools.push_back({s.name, s.max_force, s.force});
+    if (s.kind != ColliderState::Kind::body) continue;
+    // XYZ Euler angles of R = Rz Ry Rx.
+    const sim::Mat3& R = s.pose.rotation;
+    const double deg = 180.0 / M_PI;
+    const std::array<double, 3> angles = {std::atan2(R(2, 1), R(2, 2)) * deg,
+                                          std::asin(std::clamp(-R(2, 0), -1.0, 1.0)) * deg,
+                                          std::atan2(R(1, 0), R(0, 0)) * deg};
+    c.bodies.push_back({s.name, a3(s.pose.position), angles, s.velocity, s.force});
+  }
+}
+
 // ---- World ---------------------------------------------------------------------------------------------------------
 
 World::World(const Scene& scene, const WorldOptions& options) : m(std::make_unique<Impl>(scene, options)) {}
@@ -352,7 +493,9 @@ StepResult World::step() {
   StepResult r;
   m->run_due_cuts(r.cuts);
   const auto sim0 = sim::Clock::now();
+  m->contact_before_step();
   m->sim->step();  // an object cut away entirely only advances time (sim::Simulator::remove_object)
+  m->contact_after_step();
   m->update_surface();
   // The first step after a cut is part of what the cut costs the user (the solver may rebuild after it).
   const double sim_ms = sim::ms_since(sim0);
@@ -412,6 +555,32 @@ std::optional<std::size_t> World::tool_index(const std::string& name) const {
   return std::nullopt;
 }
 
+bool World::has_contact() const { return m->contact != nullptr; }
+
+std::array<double, 3> World::tool_contact_force(std::size_t tool) const {
+  if (tool >= m->tools.size()) throw std::out_of_range("World::tool_contact_force: no tool " + std::to_string(tool));
+  if (m->contact)
+    for (const ColliderState& c : m->contact->colliders())
+      if (c.kind == ColliderState::Kind::tool && c.index == tool) return c.force;
+  return {0.0, 0.0, 0.0};
+}
+
+std::vector<ContactForce> World::contact_forces() const {
+  std::vector<ContactForce> out;
+  if (!m->contact) return out;
+  for (const ColliderState& c : m->contact->colliders())
+    if (c.kind != ColliderState::Kind::prop)
+      out.push_back({c.name, c.kind == ColliderState::Kind::tool, c.force, c.max_penetration});
+  return out;
+}
+
+ContactTiming World::contact_timing() const {
+  if (!m->contact) return {};
+  return {m->contact->profile().queries, m->sim->profile().contact, m->contact->profile().rigid};
+}
+
+double World::rigid_body_energy() const { return m->contact ? m->contact->rigid_energy() : 0.0; }
+
 bool World::renders() const { return m->rendering; }
 
 RenderScene World::render_scene() const {
@@ -446,6 +615,14 @@ RenderScene World::render_scene() const {
     rs.meshes.push_back(std::move(mesh));
     if (scene.render.props[i].name == scene.render.camera.follow_tool) follow_tool(rs.camera, pose.position);
   }
+  if (m->contact) {
+    for (const ColliderState& c : m->contact->colliders()) {
+      if (c.kind != ColliderState::Kind::body || c.index >= m->body_meshes.size() || !m->body_meshes[c.index]) continue;
+      RenderMesh mesh = *m->body_meshes[c.index];
+      mesh.model = c.pose.matrix().cast<float>();
+      rs.meshes.push_back(std::move(mesh));
+    }
+  }
   for (std::size_t i = 0; i < m->tools.size(); ++i) {
     const sim::Pose pose = m->tool_pose(i, t);
     rs.tool_meshes.push_back(m->tools[i].mesh ? int(rs.meshes.size()) : -1);
@@ -473,8 +650,10 @@ Report World::report() const {
   r.cuts = m->cuts;
   r.subsystems.cut_index = m->object.grid.grid != nullptr;
   r.subsystems.material_graph = to_string(m->graph_source);
+  r.subsystems.contact = m->contact != nullptr;
   m->record_counts(r);
   m->record_state(r);
+  m->record_contact(r);
   return r;
 }
 

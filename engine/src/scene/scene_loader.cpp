@@ -327,6 +327,68 @@ std::vector<ToolSettings> to_tools(const json& tools, const std::string& file) {
   return out;
 }
 
+/// Reads `rigid_bodies`: names unique (also against tools), one shape, mass > 0 for dynamic bodies, keyframes only
+/// on kinematic ones (and at least one there), mesh files present.
+std::vector<RigidBodySettings> to_rigid_bodies(const json& bodies, const std::vector<ToolSettings>& tools,
+                                               double default_friction, const std::string& file) {
+  std::vector<RigidBodySettings> out;
+  std::set<std::string> names;
+  for (const ToolSettings& t : tools) names.insert(t.name);
+  for (std::size_t i = 0; i < bodies.size(); ++i) {
+    const json& body = bodies[i];
+    const std::string pointer = "/rigid_bodies/" + std::to_string(i);
+    RigidBodySettings b;
+    b.name = body["name"].get<std::string>();
+    if (b.name.empty()) fail(file, pointer + "/name", "must not be empty");
+    if (!names.insert(b.name).second)
+      fail(file, pointer + "/name", "duplicate name \"" + b.name + "\" (bodies and tools share one namespace)");
+    const json& shape = body["shape"];
+    int kinds = 0;
+    for (const char* kind : {"sphere", "box", "cylinder", "mesh"}) {
+      if (!shape.contains(kind)) continue;
+      ++kinds;
+      b.shape.kind = kind;
+    }
+    if (kinds != 1)
+      fail(file, pointer + "/shape", "must have exactly one of sphere, box, cylinder or mesh, got " +
+                                         std::to_string(kinds));
+    if (b.shape.kind == "sphere") b.shape.radius = shape["sphere"]["radius"].get<double>();
+    if (b.shape.kind == "box") b.shape.size = to_vec3(shape["box"]["size"]);
+    if (b.shape.kind == "cylinder") {
+      b.shape.radius = shape["cylinder"]["radius"].get<double>();
+      b.shape.height = shape["cylinder"]["height"].get<double>();
+    }
+    if (b.shape.kind == "mesh") b.shape.mesh_path = resolve_mesh(shape["mesh"], pointer + "/shape/mesh", file);
+    b.shape.scale = shape["scale"].get<double>();
+    b.motion = body["motion"].get<std::string>();
+    if (body.contains("mass")) b.mass = body["mass"].get<double>();
+    if (b.motion == "dynamic" && !(b.mass > 0.0))
+      fail(file, pointer + (body.contains("mass") ? "/mass" : ""),
+           "a dynamic body needs a mass > 0, got " + (body.contains("mass") ? format_number(b.mass) : "none"));
+    b.position = to_vec3(body["position"]);
+    b.rotation_deg = to_vec3(body["rotation_deg"]);
+    b.keyframes = to_pose_keys(body["keyframes"], pointer + "/keyframes", file);
+    if (b.motion != "kinematic" && !b.keyframes.empty())
+      fail(file, pointer + "/keyframes", "only a kinematic body follows keyframes; this one is " + b.motion);
+    if (b.motion == "kinematic" && b.keyframes.empty())
+      fail(file, pointer + "/keyframes", "a kinematic body needs at least one keyframe");
+    b.friction = body.contains("friction") ? body["friction"].get<double>() : default_friction;
+    b.render = body["render"].get<std::string>();
+    out.push_back(std::move(b));
+  }
+  return out;
+}
+
+/// Reads `contact`.
+ContactSettings to_contact(const json& contact) {
+  ContactSettings c;
+  c.has_stiffness = contact.contains("stiffness");
+  if (c.has_stiffness) c.stiffness = contact["stiffness"].get<double>();
+  c.friction = contact["friction"].get<double>();
+  c.damping = contact["damping"].get<double>();
+  return c;
+}
+
 /// Reads `solver`.
 SolverSettings to_solver(const json& solver) {
   SolverSettings s;
@@ -472,6 +534,7 @@ std::vector<RenderProp> to_props(const json& props, const std::string& file) {
     entry.mesh_path = resolve_mesh(prop["mesh"], pointer + "/mesh", file);
     entry.scale = prop["scale"].get<double>();
     entry.material = prop["material"].get<std::string>();
+    entry.collide = prop["collide"].get<bool>();
     entry.keyframes = to_pose_keys(prop["keyframes"], pointer + "/keyframes", file);
     out.push_back(std::move(entry));
   }
@@ -522,6 +585,12 @@ Scene to_scene(const json& document, const std::string& file, bool duration_give
   scene.solver = to_solver(document["solver"]);
   scene.object = to_object(document["object"], file);
   scene.tools = to_tools(document["tools"], file);
+  scene.contact = to_contact(document["contact"]);
+  for (std::size_t i = 0; i < scene.tools.size(); ++i) {
+    const json& tool = document["tools"][i];
+    scene.tools[i].friction = tool.contains("friction") ? tool["friction"].get<double>() : scene.contact.friction;
+  }
+  scene.rigid_bodies = to_rigid_bodies(document["rigid_bodies"], scene.tools, scene.contact.friction, file);
   const json& cutting = document["cutting"];
   scene.cutting.remove_fragments = cutting["remove_fragments"].get<std::string>();
   scene.cutting.fragment_volume = cutting["fragment_volume"].get<double>();
@@ -533,6 +602,7 @@ Scene to_scene(const json& document, const std::string& file, bool duration_give
   scene.output.surface_final = document["output"]["surface_final"].get<bool>();
   scene.output.surface_every = document["output"]["surface_every"].get<int>();
   scene.output.ply_float = document["output"]["ply_precision"].get<std::string>() == "float";
+  scene.output.contact_forces = document["output"]["contact_forces"].get<bool>();
   // The expected block stays JSON text (validated by the schema); see expected.hpp.
   if (document.contains("expected")) scene.expected_json = document["expected"].dump();
   return scene;

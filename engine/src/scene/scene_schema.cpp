@@ -140,6 +140,76 @@ constexpr double max_int = INT_MAX;
 
 // ---- the scene format -----------------------------------------------------------------------------------------------
 
+// Rigid bodies (issue 16): Bullet integrates the dynamic ones; all of them collide with the tissue.
+Entry make_rigid_bodies() {
+  Entry mesh = string("mesh", "A closed triangle mesh file free of self-intersections (path relative to the scene "
+                              "file), in the body frame, times `scale`. A dynamic body collides with other rigid "
+                              "bodies by the mesh's convex hull.");
+  Entry shape = required(object(
+      "shape",
+      {optional(object("sphere", {required(number("radius", std::nullopt, greater_than(0), "Radius, m."))},
+                       "A sphere centred on the body frame.")),
+       optional(object("box",
+                       {required(make_entry("size", Type::number_array, "Edge lengths along the body's x, y, z, m."))},
+                       "A box centred on the body frame.")),
+       optional(object("cylinder",
+                       {required(number("radius", std::nullopt, greater_than(0), "Radius, m.")),
+                        required(number("height", std::nullopt, greater_than(0), "Length along the body's z axis, m."))},
+                       "A cylinder along the body's z axis, centred on the body frame.")),
+       optional(std::move(mesh)),
+       number("scale", 1.0, greater_than(0), "Factor from `mesh` coordinates to metres.")},
+      "Exactly one of `sphere`, `box`, `cylinder` or `mesh`."));
+  shape.children[1].children[0].length = 3;
+  shape.children[1].children[0].range = greater_than(0);
+  shape.default_value.reset();
+  Entry mass = optional(number("mass", std::nullopt, make_range(std::nullopt, false, std::nullopt, false),
+                               "Mass, kg; required and > 0 for a dynamic body, ignored otherwise."));
+  mass.default_doc = "none";
+  Entry friction = optional(number("friction", std::nullopt, at_least(0),
+                                   "Coulomb friction coefficient between this body and the tissue, dimensionless."));
+  friction.default_doc = "`contact.friction`";
+  return object_array(
+      "rigid_bodies",
+      {required(string("name", "Body name, unique among bodies and tools, not empty.")),
+       std::move(shape),
+       choice("motion", {"dynamic", "fixed", "kinematic"}, "fixed",
+              "`dynamic`: Bullet integrates it under gravity, contact with the tissue and with other bodies; "
+              "`fixed`: it stays at `position`; `kinematic`: it follows `keyframes`, as tools do."),
+       std::move(mass),
+       vec3("position", std::array{0.0, 0.0, 0.0}, "Where the body frame's origin is at t = 0, world, m."),
+       vec3("rotation_deg", std::array{0.0, 0.0, 0.0},
+            "XYZ Euler angles of the body frame at t = 0 (fixed axes, as tools), degrees."),
+       object_array("keyframes",
+                    {required(number("t", std::nullopt, at_least(0), "Time, s; strictly increasing along the list.")),
+                     vec3("position", std::array{0.0, 0.0, 0.0}, "Where the body frame's origin is, world, m."),
+                     vec3("rotation_deg", std::array{0.0, 0.0, 0.0}, "XYZ Euler angles of the body frame, degrees.")},
+                    "Pose over time of a kinematic body (only allowed with `motion` = `kinematic`, at least one): "
+                    "position linear, rotation spherical-linear, held before the first and after the last."),
+       std::move(friction),
+       choice("render", {"metal", "bone", "glass", "none"}, "metal",
+              "How the body is drawn (its shape, at its pose); `glass` is shaded as metal for now; `none`: not drawn.")},
+      "Rigid bodies (Bullet) that collide with the tissue.");
+}
+
+// Contact between the tissue and rigid shapes (issue 16).
+Entry make_contact() {
+  Entry stiffness = optional(number("stiffness", std::nullopt, greater_than(0),
+                                    "Penalty stiffness, Pa/m: pressure per metre of penetration. The default is 10 E / "
+                                    "h_min, E the object's Young's modulus and h_min the edge of its finest leaf at the "
+                                    "start: a layer one finest leaf thick shortens by p h_min / E under a pressure p, "
+                                    "and the penalty lets the surface sink a tenth of that into the shape."));
+  stiffness.default_doc = "10 E / h_min";
+  return object("contact",
+                {std::move(stiffness),
+                 number("friction", 0.3, at_least(0),
+                        "Coulomb friction coefficient of tools and bodies that set none, dimensionless (static = "
+                        "sliding; a contact slower than 0.1 mm/s counts as sticking, see docs/architecture.md)."),
+                 number("damping", 1e-3, at_least(0),
+                        "Contact damping time, s: each collision sample's normal damping coefficient is `damping` "
+                        "times its penalty stiffness.")},
+                "Contact of the tissue with tools that collide, colliding props and rigid bodies.");
+}
+
 // function-length: data table (every key of the scene format)
 Entry make_scene_schema() {
   Entry name = string("name", "Scene name, used in the report.");
@@ -258,6 +328,10 @@ Entry make_scene_schema() {
           "`scale`)."))},
       "The volume a cut removes, in tool coordinates: a closed, oriented triangle mesh file free of "
       "self-intersections (path relative to the scene file, times `scale`), or `{\"cylinder\": …}`."));
+  Entry tool_friction = optional(number("friction", std::nullopt, at_least(0),
+                                        "Coulomb friction coefficient between this tool and the tissue (static = "
+                                        "sliding), dimensionless."));
+  tool_friction.default_doc = "`contact.friction`";
   Entry tools = object_array(
       "tools",
       {required(string("name", "Tool name, unique and not empty; `render.camera.follow_tool` may name it.")),
@@ -267,6 +341,7 @@ Entry make_scene_schema() {
        std::move(blade),
        boolean("collide", false,
                "The tool takes part in rigid contact (Bullet) through its mesh, or its blade when it has no mesh."),
+       std::move(tool_friction),
        std::move(tool_keyframes),
        object_array("cuts",
                     {required(number("t", std::nullopt, at_least(0),
@@ -330,6 +405,9 @@ Entry make_scene_schema() {
                required(string("mesh", "Closed triangle mesh file, path relative to the scene file.")),
                number("scale", 1.0, greater_than(0), "Factor from mesh coordinates to metres (0.001 for mm)."),
                choice("material", {"bone", "metal", "tissue"}, "bone", "Shading: bone, metal or tissue."),
+               boolean("collide", false,
+                       "The prop is a static collider (Bullet, at its pose at t = 0; concave meshes allowed): the "
+                       "tissue rests against it. Its mesh must then be closed and free of self-intersections."),
                object_array("keyframes",
                             {required(number("t", std::nullopt, at_least(0),
                                              "Time, s; strictly increasing along the list.")),
@@ -338,7 +416,8 @@ Entry make_scene_schema() {
                                   "XYZ Euler angles of the prop frame, degrees.")},
                             "Pose over time: position linear, rotation spherical-linear between keyframes, held "
                             "before the first and after the last; none: the mesh as it is in its file.")},
-              "Render-only meshes (the knee context, an instrument); they take no part in the simulation."),
+              "Meshes drawn around the object (the knee context, an instrument); they take no part in the simulation unless "
+              "`collide` makes them static colliders."),
           object("overlays",
                  {boolean("octree", false, "Draw the octree leaves as a wireframe (deformed)."),
                   boolean("dofs", false, "Draw the DOFs as points."),
@@ -356,6 +435,8 @@ Entry make_scene_schema() {
                     std::move(object_entry),
                     std::move(tools),
                     std::move(cutting),
+                    make_rigid_bodies(),
+                    make_contact(),
                     object_array("probes",
                                  {required(string("name", "Probe name, unique and not empty.")),
                                   required(vec3("point", std::nullopt, "Rest-space point, m."))},
@@ -367,6 +448,9 @@ Entry make_scene_schema() {
                                     "Write, as binary PLY in metres, the rest surface before any cut "
                                     "(`surface_rest.ply`), the rest surface after the cuts (`surface_rest_final.ply`, "
                                     "on which cuts show as holes) and the final deformed surface (`surface_final.ply`)."),
+                            boolean("contact_forces", false,
+                                    "Write `contact_forces.csv`: one row per step and colliding tool or rigid body, "
+                                    "`t,name,fx,fy,fz,max_penetration_m` (the force the tissue exerts on it, N)."),
                             integer("surface_every", 0, closed(0, max_int),
                                     "Write the deformed surface every N steps as `surfaces/surface_<step>.ply` "
                                     "(6 digits, binary PLY, metres), and the rest surface once; 0: never."),

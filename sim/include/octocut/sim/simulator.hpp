@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "octocut/sim/contact.hpp"
 #include "octocut/sim/linear_solver.hpp"
 #include "octocut/sim/object.hpp"
 
@@ -44,6 +45,7 @@ struct StepProfile {
   double forces = 0.0;     ///< elastic force and K v
   double assembly = 0.0;   ///< rotated element stiffness and scatter into the system matrix
   double solve = 0.0;      ///< linear solve (factorisation or pcg)
+  double contact = 0.0;    ///< contact terms added to the system and their forces afterwards (part of assembly)
 };
 
 /// A model revision made ready off to the side by Simulator::prepare_model: the state carried over, the FEM system,
@@ -93,6 +95,14 @@ class Simulator {
   /// Switches to a prepared revision: afterwards the simulator is as set_model + refresh_solver would have left it.
   /// The state to carry over was taken when it was prepared: nothing may have stepped the simulator since.
   void adopt(PreparedModel prepared);
+  /// The contacts the next step() uses (dynamic mode; a static solve ignores them), found by the caller at the
+  /// current state. They act through the whole step; when the step is split after a failure, each part starts from
+  /// the penetration and friction state the part before left. DOF indices refer to the current revision.
+  void set_contacts(std::vector<Contact> contacts) { m_contacts = std::move(contacts); }
+  /// What each contact of the last step did (same order as set_contacts; empty after a step that failed at the
+  /// smallest dt, or without contacts).
+  [[nodiscard]] const std::vector<ContactOutcome>& contact_outcomes() const { return m_outcomes; }
+
   /// Replaces the state (same revision).
   void set_state(SimState state);
   /// Drops the object, for a cut that removed every element: afterwards empty() holds, model() is the current
@@ -156,6 +166,8 @@ class Simulator {
   SpMat m_A;                         ///< system matrix with the fixed pattern of this revision
   bool m_pattern_analyzed = false;
   VecX m_dv_prev;                    ///< last step's velocity increment, warm start (3 num_dofs)
+  std::vector<Contact> m_contacts;   ///< contacts of the next (or current) step
+  std::vector<ContactOutcome> m_outcomes;  ///< what they did in the last step
 };
 
 }  // namespace octocut::sim

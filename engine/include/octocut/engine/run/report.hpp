@@ -52,8 +52,34 @@ struct Subsystems {
   bool renderer = false;                 ///< a GL renderer was started (render.enabled, no --no-render)
   bool frame_writer = false;             ///< frames were written (output.frames with a renderer)
   bool cut_index = false;                ///< the face grid over S that cuts use (a tool cut, or has cut events)
-  bool contact = false;                  ///< a rigid-body contact world (not built yet in this version)
+  bool contact = false;                  ///< a Bullet contact world (something collides or there are rigid bodies)
   std::string material_graph = "box";    ///< "box" | "cache" | "meshed": where M came from
+};
+
+/// A colliding tool in the report's `contact.tools`.
+struct ToolContactSummary {
+  std::string name;
+  double max_force_n = 0.0;              ///< largest |force| the tissue exerted on it in any step, N
+  std::array<double, 3> final_force_n{}; ///< the force in the last step, N (3)
+};
+
+/// A rigid body in the report's `contact.bodies`, at the end of the run.
+struct BodyContactSummary {
+  std::string name;
+  std::array<double, 3> position{};      ///< body frame origin, m (3)
+  std::array<double, 3> rotation_deg{};  ///< XYZ Euler angles, degrees (3)
+  std::array<double, 3> velocity_m_s{};  ///< linear velocity (dynamic bodies; 0 otherwise), m/s (3)
+  std::array<double, 3> force_n{};       ///< the force the tissue exerts on it in the last step, N (3)
+};
+
+/// The report's `contact` block (null when the scene built no contact world).
+struct ContactSummary {
+  bool present = false;
+  double max_penetration_m = 0.0;  ///< deepest collision sample at the start of any step, m
+  long samples = 0;                ///< collision samples on S now
+  double stiffness_pa_m = 0.0;     ///< the penalty used, Pa/m
+  std::vector<ToolContactSummary> tools;
+  std::vector<BodyContactSummary> bodies;
 };
 
 struct Report {
@@ -74,6 +100,7 @@ struct Report {
   Subsystems subsystems;
   std::vector<CutSummary> cuts;
   std::vector<ProbeResult> probes;
+  ContactSummary contact;
   bool finite = true;
   long recoveries = 0, failed_steps = 0, solver_failures = 0, nonfinite = 0, speed_limit = 0, newton_unconverged = 0;
   double max_speed_m_s = 0.0;

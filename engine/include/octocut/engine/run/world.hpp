@@ -44,6 +44,21 @@ struct StepResult {
   double ms = 0.0;                ///< wall time of the step, its cuts included, ms
 };
 
+/// The contact force on one colliding tool or rigid body after a step (contact_forces.csv's row).
+struct ContactForce {
+  std::string name;
+  bool tool = false;                     ///< a tool (else a rigid body)
+  std::array<double, 3> force_n{};       ///< the force the tissue exerts on it in the last step, N (3)
+  double max_penetration_m = 0.0;        ///< deepest sample in it at the start of the last step, m
+};
+
+/// Where the contact time of the last step went, ms.
+struct ContactTiming {
+  double queries = 0.0;  ///< sample positions, the bounding-box prefilter and Bullet's distance queries
+  double terms = 0.0;    ///< the contact terms added to the implicit system and their forces afterwards
+  double rigid = 0.0;    ///< forces onto the bodies and Bullet's step
+};
+
 /// True when every DOF position and velocity of `state` is finite.
 bool state_finite(const sim::SimState& state);
 
@@ -104,6 +119,19 @@ class World {
   [[nodiscard]] const Material& material() const;
   /// The debug overlays render_scene() draws from now on (the scene's render.overlays at the start).
   void set_overlays(const OverlaySettings& overlays);
+  /// True when the scene collides (a tool or prop collides, or it has rigid bodies): a Bullet world is built.
+  [[nodiscard]] bool has_contact() const;
+  /// The force the tissue exerted on tool `tool` in the last step, N: for a haptic device. Zero for a tool that
+  /// does not collide, and before the first step. Throws std::out_of_range for a bad index.
+  [[nodiscard]] std::array<double, 3> tool_contact_force(std::size_t tool) const;
+  /// The contact force on every colliding tool and rigid body after the last step (tools first, in scene order);
+  /// empty without contact.
+  [[nodiscard]] std::vector<ContactForce> contact_forces() const;
+  /// Where the contact time of the last step went (zero without contact).
+  [[nodiscard]] ContactTiming contact_timing() const;
+  /// Kinetic plus gravitational potential energy of the dynamic rigid bodies (potential zero at the world origin),
+  /// J; 0 without any.
+  [[nodiscard]] double rigid_body_energy() const;
 
   /// True when this world draws: the scene has render.enabled and WorldOptions::render is set.
   [[nodiscard]] bool renders() const;

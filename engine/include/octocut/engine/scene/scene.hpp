@@ -123,6 +123,7 @@ struct RenderProp {
   std::string mesh_path;                ///< absolute path (resolved against the scene file)
   double scale = 1.0;                   ///< multiplies mesh coordinates to get metres
   std::string material = "bone";        ///< "bone" | "metal" | "tissue"
+  bool collide = false;                 ///< a static collider (Bullet) at its pose at t = 0
   std::vector<PropKeyframe> keyframes;  ///< sorted by t; none: the identity pose
 };
 
@@ -145,6 +146,7 @@ struct OutputSettings {
   bool surface_final = false;
   int surface_every = 0;
   bool ply_float = false;  ///< PLY files in float32 instead of float64 (`ply_precision`)
+  bool contact_forces = false;  ///< contact_forces.csv: t,name,fx,fy,fz,max_penetration_m per step and collider
 };
 
 /// A cylindrical blade in tool coordinates: axis z, centred on the tool origin (`tools[]/blade/cylinder`).
@@ -168,7 +170,8 @@ struct ToolSettings {
   bool blade_is_cylinder = false;       ///< true: `cylinder`; false: the mesh file `blade_path`
   CylinderBlade cylinder;               ///< when blade_is_cylinder, m (not scaled by `scale`)
   std::string blade_path;               ///< absolute path of the blade mesh when !blade_is_cylinder
-  bool collide = false;                 ///< the mesh takes part in rigid contact (Bullet)
+  bool collide = false;                 ///< the mesh (or else the blade) takes part in rigid contact (Bullet)
+  double friction = 0.3;                ///< Coulomb coefficient against the tissue (default: contact.friction)
   std::vector<ToolKeyframe> keyframes;  ///< sorted by t, strictly increasing, at least one
   std::vector<ToolCut> cuts;            ///< sorted by t, strictly increasing, each in [0, duration]
 };
@@ -180,6 +183,37 @@ struct CuttingSettings {
   bool verify = true;                    ///< check S after each cut: closed, free of self-intersections
 };
 
+/// The shape of a rigid body (`rigid_bodies[]/shape`), in the body frame.
+struct RigidShape {
+  std::string kind = "sphere";            ///< "sphere" | "box" | "cylinder" | "mesh"
+  double radius = 0.0;                    ///< sphere, cylinder, m
+  double height = 0.0;                    ///< cylinder, along z, m
+  std::array<double, 3> size{};           ///< box edge lengths, m (3)
+  std::string mesh_path;                  ///< mesh: absolute path
+  double scale = 1.0;                     ///< mesh: file coordinates to metres
+};
+
+/// A rigid body (`rigid_bodies[]`): Bullet integrates the dynamic ones; all collide with the tissue.
+struct RigidBodySettings {
+  std::string name;
+  RigidShape shape;
+  std::string motion = "fixed";           ///< "dynamic" | "fixed" | "kinematic"
+  double mass = 0.0;                      ///< kg, > 0 for a dynamic body
+  std::array<double, 3> position{};       ///< body frame origin at t = 0, m (3)
+  std::array<double, 3> rotation_deg{};   ///< XYZ Euler angles at t = 0, degrees (3)
+  std::vector<PoseKey> keyframes;         ///< kinematic only, sorted by t
+  double friction = 0.3;                  ///< Coulomb coefficient against the tissue
+  std::string render = "metal";           ///< "metal" | "bone" | "glass" | "none"
+};
+
+/// Contact parameters (`contact`).
+struct ContactSettings {
+  bool has_stiffness = false;  ///< false: derived from E and the finest leaf (World)
+  double stiffness = 0.0;      ///< penalty, Pa/m
+  double friction = 0.3;       ///< default Coulomb coefficient
+  double damping = 1e-3;       ///< s: damping coefficient = damping * stiffness
+};
+
 /// A fully validated scene with defaults filled in.
 struct Scene {
   std::string file;        ///< the scene file path as given
@@ -189,6 +223,8 @@ struct Scene {
   SolverSettings solver;
   ObjectSettings object;
   std::vector<ToolSettings> tools;  ///< keyframed instruments, in file order
+  std::vector<RigidBodySettings> rigid_bodies;  ///< in file order
+  ContactSettings contact;
   CuttingSettings cutting;
   std::vector<Probe> probes;
   RenderSettings render;

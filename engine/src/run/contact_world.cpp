@@ -1,0 +1,429 @@
+// The rigid side of contact: a Bullet world (issue 16). See contact_world.hpp. Bullet's types stay in this file.
+#include "run/contact_world.hpp"
+
+#include <BulletCollision/CollisionShapes/btTriangleShape.h>
+#include <BulletCollision/NarrowPhaseCollision/btGjkEpa2.h>
+#include <btBulletDynamicsCommon.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "octocut/engine/io/mesh_io.hpp"
+#include "octocut/engine/run/scene_object.hpp"
+#include "octocut/engine/run/tool.hpp"
+#include "octocut/engine/scene/scene_loader.hpp"
+#include "octocut/sim/timing.hpp"
+
+namespace octocut::engine {
+
+namespace {
+
+using sim::Vec3;
+
+constexpr double kMargin = 1e-4;  // Bullet's collision margin of convex shapes (rigid-rigid contact only), m
+
+btVector3 bt(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
+Vec3 from_bt(const btVector3& v) { return {v.x(), v.y(), v.z()}; }
+
+btTransform bt(const sim::Pose& p) {
+  const sim::Mat3& r = p.rotation;
+  btMatrix3x3 basis(r(0, 0), r(0, 1), r(0, 2), r(1, 0), r(1, 1), r(1, 2), r(2, 0), r(2, 1), r(2, 2));
+  return btTransform(basis, bt(p.position));
+}
+
+sim::Pose from_bt(const btTransform& t) {
+  sim::Pose p;
+  p.position = from_bt(t.getOrigin());
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) p.rotation(i, j) = t.getBasis()[i][j];
+  return p;
+}
+
+sim::Pose initial_pose(const std::array<double, 3>& position, const std::array<double, 3>& rotation_deg) {
+  sim::Pose p;
+  p.position = to_vec3(position);
+  p.rotation = sim::euler_xyz_deg(to_vec3(rotation_deg));
+  return p;
+}
+
+// A collider mesh, loaded and checked as a solid (closed, oriented, free of self-intersections).
+sim::TriMesh load_collider(const Scene& scene, const std::string& path, double scale, const std::string& pointer) {
+  try {
+    return load_mesh(path, MeshLoadOptions{scale, true, true}).mesh;
+  } catch (const MeshError& e) {
+    throw SceneError(scene.file + ": " + pointer + ": " + e.what());
+  }
+}
+
+// One rigid shape in the Bullet world.
+struct Collider {
+  ColliderState state;
+  std::unique_ptr<btCollisionShape> shape;        // the shape the tissue is queried against (and Bullet's, mostly)
+  std::unique_ptr<btCollisionShape> hull;         // a dynamic mesh body's convex hull (Bullet's rigid contact)
+  std::unique_ptr<btTriangleIndexVertexArray> mesh_array;
+  std::vector<btScalar> vertices;                 // 3 |V|, m, kept alive for mesh_array
+  std::vector<int> triangles;                     // 3 |F|
+  btBvhTriangleMeshShape* concave = nullptr;      // shape, when it is a triangle mesh
+  btConvexShape* convex = nullptr;                // shape, when it is convex
+  std::unique_ptr<btDefaultMotionState> motion;
+  std::unique_ptr<btRigidBody> body;
+  bool dynamic = false;
+  bool kinematic = false;                         // follows keyframes (tools and kinematic bodies)
+  std::vector<sim::PoseKeyframe> keyframes;       // kinematic bodies
+  double friction = 0.0;
+  Vec3 force = Vec3::Zero();                      // on the collider, this step, N
+  Vec3 torque = Vec3::Zero();                     // about its centre of mass, N m
+  std::vector<Vec3> cache_local;                  // per sample: local position at its last query, m
+  std::vector<double> cache_clearance;            // per sample: distance known free of the surface there, m
+  std::vector<double> last_depth;                 // per sample: its penetration at the last query, m (0: none)
+};
+
+// The nearest triangle of a concave mesh to a local point, through Bullet's BVH and GJK.
+struct NearestTriangle : btTriangleCallback {
+  btVector3 point;
+  double best = std::numeric_limits<double>::infinity();
+  btVector3 closest{0, 0, 0};
+  btVector3 face_normal{0, 0, 1};
+  void processTriangle(btVector3* tri, int, int) override {
+    btTriangleShape shape(tri[0], tri[1], tri[2]);
+    shape.setMargin(0);
+    btGjkEpaSolver2::sResults r;
+    const btScalar d = btGjkEpaSolver2::SignedDistance(point, 0, &shape, btTransform::getIdentity(), r);
+    const double dist = d > 0 ? double(d) : 0.0;
+    if (dist < best) {
+      best = dist;
+      closest = d > 0 ? r.witnesses[0] : point;
+      face_normal = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
+    }
+  }
+};
+
+// The signed distance of a world point to a collider at `pose`: < 0 inside. `normal` (world, unit) points out of
+// the collider. `clearance` gets a distance the point may move (in the collider's frame) and stay outside.
+double signed_distance(const Collider& c, const btTransform& pose, const Vec3& p, double depth, Vec3& normal,
+                       double& clearance) {
+  if (c.convex) {
+    btGjkEpaSolver2::sResults r;
+    const double d = btGjkEpaSolver2::SignedDistance(bt(p), 0, c.convex, pose, r);
+    if (!std::isfinite(d)) {
+      clearance = 0.0;
+      return 1.0;
+    }
+    normal = from_bt(r.normal);
+    clearance = std::max(0.0, d);
+    return d;
+  }
+  NearestTriangle cb;
+  cb.point = pose.invXform(bt(p));
+  const btVector3 e(depth, depth, depth);
+  c.concave->processAllTriangles(&cb, cb.point - e, cb.point + e);
+  if (!(cb.best < depth)) {
+    clearance = depth;  // nothing within the cube of half-size depth: nothing within depth
+    return depth;
+  }
+  const btVector3 away = cb.point - cb.closest;
+  const bool inside = away.dot(cb.face_normal) < 0;
+  clearance = inside ? 0.0 : cb.best;
+  btVector3 n = cb.best > 1e-12 ? (inside ? -away : away) : cb.face_normal;
+  n.normalize();
+  normal = from_bt(pose.getBasis() * n);
+  return inside ? -cb.best : cb.best;
+}
+
+}  // namespace
+
+bool scene_collides(const Scene& scene) {
+  if (!scene.rigid_bodies.empty()) return true;
+  for (const ToolSettings& t : scene.tools)
+    if (t.collide) return true;
+  for (const RenderProp& p : scene.render.props)
+    if (p.collide) return true;
+  return false;
+}
+
+double default_contact_stiffness(double young_modulus, double finest_leaf) { return 10.0 * young_modulus / finest_leaf; }
+
+struct ContactWorld::Impl {
+  const Scene& scene;
+  double stiffness = 0.0;  // Pa/m
+  double depth = 0.0;      // m
+  std::vector<Collider> colliders;
+  std::vector<ColliderState> states;
+  ContactProfile profile;
+  double max_penetration = 0.0;
+  std::size_t samples = 0;
+
+  // This step's contacts: which collider and world point each has.
+  struct ContactRef {
+    std::size_t collider;
+    Vec3 point;
+  };
+  std::vector<ContactRef> refs;
+
+  btDefaultCollisionConfiguration config;
+  btCollisionDispatcher dispatcher{&config};
+  btDbvtBroadphase broadphase;
+  btSequentialImpulseConstraintSolver solver;
+  btDiscreteDynamicsWorld world{&dispatcher, &broadphase, &solver, &config};
+
+  Impl(const Scene& s, double k, double d) : scene(s), stiffness(k), depth(d) {}
+  ~Impl() {
+    for (Collider& c : colliders)
+      if (c.body) world.removeRigidBody(c.body.get());
+  }
+  void set_mesh(Collider& c, const sim::TriMesh& mesh);
+  void add(Collider c, double mass, const sim::Pose& pose);
+  [[nodiscard]] sim::Pose pose_at(const Collider& c, double t, const std::vector<sim::Pose>& tools) const;
+  void query(std::size_t ci, const sim::ContactSamples& samples, const std::vector<Vec3>& x,
+             const std::vector<Vec3>& v, double t, double dt, const std::vector<sim::Pose>& now,
+             const std::vector<sim::Pose>& next, std::vector<sim::Contact>& out);
+};
+
+void ContactWorld::Impl::set_mesh(Collider& c, const sim::TriMesh& mesh) {
+  for (const Vec3& p : mesh.vertices)
+    for (int k = 0; k < 3; ++k) c.vertices.push_back(p[k]);
+  for (const auto& t : mesh.triangles)
+    for (int k = 0; k < 3; ++k) c.triangles.push_back(t[std::size_t(k)]);
+  c.mesh_array = std::make_unique<btTriangleIndexVertexArray>(int(mesh.triangles.size()), c.triangles.data(),
+                                                              3 * int(sizeof(int)), int(mesh.vertices.size()),
+                                                              c.vertices.data(), 3 * int(sizeof(btScalar)));
+  auto bvh = std::make_unique<btBvhTriangleMeshShape>(c.mesh_array.get(), true);
+  bvh->setMargin(kMargin);
+  c.concave = bvh.get();
+  c.shape = std::move(bvh);
+}
+
+void ContactWorld::Impl::add(Collider c, double mass, const sim::Pose& pose) {
+  btCollisionShape* rigid_shape = c.hull ? c.hull.get() : c.shape.get();
+  btVector3 inertia(0, 0, 0);
+  if (c.dynamic) rigid_shape->calculateLocalInertia(mass, inertia);
+  c.motion = std::make_unique<btDefaultMotionState>(bt(pose));
+  btRigidBody::btRigidBodyConstructionInfo info(c.dynamic ? mass : 0.0, c.motion.get(), rigid_shape, inertia);
+  info.m_friction = c.friction;
+  c.body = std::make_unique<btRigidBody>(info);
+  if (c.kinematic) c.body->setCollisionFlags(c.body->getCollisionFlags() | btCollisionObject::CF_KINEMATIC_OBJECT);
+  c.body->setActivationState(DISABLE_DEACTIVATION);
+  world.addRigidBody(c.body.get());
+  c.state.pose = pose;
+  colliders.push_back(std::move(c));
+}
+
+sim::Pose ContactWorld::Impl::pose_at(const Collider& c, double t, const std::vector<sim::Pose>& tools) const {
+  if (c.state.kind == ColliderState::Kind::tool) return tools.at(c.state.index);
+  if (c.kinematic) return sim::interpolate_pose(c.keyframes, t);
+  if (c.dynamic) return from_bt(c.body->getWorldTransform());
+  btTransform tr;
+  c.motion->getWorldTransform(tr);
+  return from_bt(tr);
+}
+
+// function-length: the three kinds of collider, each a few lines
+ContactWorld::ContactWorld(const Scene& scene, const std::vector<sim::TriMesh>& tool_shapes, double stiffness,
+                           double search_depth)
+    : m(std::make_unique<Impl>(scene, stiffness, search_depth)) {
+  const sim::Vec3 g = to_vec3(scene.solver.gravity);
+  m->world.setGravity(bt(g));
+  // Kinematic tools: their mesh (or blade mesh), or their cylinder blade.
+  for (std::size_t i = 0; i < scene.tools.size(); ++i) {
+    const ToolSettings& t = scene.tools[i];
+    if (!t.collide) continue;
+    Collider c;
+    c.state.name = t.name;
+    c.state.kind = ColliderState::Kind::tool;
+    c.state.index = i;
+    c.kinematic = true;
+    c.friction = t.friction;
+    if (!tool_shapes.at(i).triangles.empty()) {
+      m->set_mesh(c, tool_shapes[i]);
+    } else {
+      auto cyl = std::make_unique<btCylinderShapeZ>(btVector3(t.cylinder.radius, t.cylinder.radius, 0.5 * t.cylinder.height));
+      cyl->setMargin(std::min(kMargin, 0.1 * t.cylinder.radius));
+      c.convex = cyl.get();
+      c.shape = std::move(cyl);
+    }
+    m->add(std::move(c), 0.0, tool_pose(t, 0.0));
+  }
+  // Static colliders: props with `collide`, at their pose at t = 0.
+  for (std::size_t i = 0; i < scene.render.props.size(); ++i) {
+    const RenderProp& p = scene.render.props[i];
+    if (!p.collide) continue;
+    Collider c;
+    c.state.name = p.name;
+    c.state.kind = ColliderState::Kind::prop;
+    c.state.index = i;
+    c.friction = scene.contact.friction;
+    m->set_mesh(c, load_collider(scene, p.mesh_path, p.scale, "/render/props/" + std::to_string(i) + "/mesh"));
+    m->add(std::move(c), 0.0, sim::interpolate_pose(pose_keyframes(p.keyframes), 0.0));
+  }
+  // Rigid bodies.
+  for (std::size_t i = 0; i < scene.rigid_bodies.size(); ++i) {
+    const RigidBodySettings& b = scene.rigid_bodies[i];
+    Collider c;
+    c.state.name = b.name;
+    c.state.kind = ColliderState::Kind::body;
+    c.state.index = i;
+    c.dynamic = b.motion == "dynamic";
+    c.kinematic = b.motion == "kinematic";
+    c.keyframes = pose_keyframes(b.keyframes);
+    c.friction = b.friction;
+    const RigidShape& s = b.shape;
+    std::unique_ptr<btConvexShape> convex;
+    if (s.kind == "sphere") convex = std::make_unique<btSphereShape>(s.radius);
+    if (s.kind == "box") convex = std::make_unique<btBoxShape>(0.5 * btVector3(s.size[0], s.size[1], s.size[2]));
+    if (s.kind == "cylinder") convex = std::make_unique<btCylinderShapeZ>(btVector3(s.radius, s.radius, 0.5 * s.height));
+    if (convex) {
+      if (s.kind != "sphere") convex->setMargin(kMargin);
+      c.convex = convex.get();
+      c.shape = std::move(convex);
+    } else {
+      const sim::TriMesh mesh =
+          load_collider(scene, s.mesh_path, s.scale, "/rigid_bodies/" + std::to_string(i) + "/shape/mesh");
+      m->set_mesh(c, mesh);
+      if (c.dynamic) {
+        auto hull = std::make_unique<btConvexHullShape>();
+        for (const Vec3& p : mesh.vertices) hull->addPoint(bt(p), false);
+        hull->recalcLocalAabb();
+        hull->setMargin(kMargin);
+        c.hull = std::move(hull);
+      }
+    }
+    const sim::Pose pose = c.kinematic ? sim::interpolate_pose(c.keyframes, 0.0) : initial_pose(b.position, b.rotation_deg);
+    m->add(std::move(c), b.mass, pose);
+  }
+  for (const Collider& c : m->colliders) m->states.push_back(c.state);
+}
+
+ContactWorld::~ContactWorld() = default;
+
+void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& samples, const std::vector<Vec3>& x,
+                               const std::vector<Vec3>& v, double t, double dt, const std::vector<sim::Pose>& now,
+                               const std::vector<sim::Pose>& next, std::vector<sim::Contact>& out) {
+  Collider& c = colliders[ci];
+  const sim::Pose pose = pose_at(c, t, now);
+  const sim::Pose pose_next = c.kinematic ? pose_at(c, t + dt, next) : pose;
+  const btTransform tr = bt(pose);
+  btVector3 lo, hi;
+  c.shape->getAabb(tr, lo, hi);
+  const int n = samples.size();
+  if (c.cache_local.size() != std::size_t(n)) {
+    c.cache_local.assign(std::size_t(n), Vec3::Zero());
+    c.cache_clearance.assign(std::size_t(n), -1.0);
+    c.last_depth.assign(std::size_t(n), 0.0);
+  }
+  const btVector3 com = c.dynamic ? c.body->getCenterOfMassPosition() : btVector3(0, 0, 0);
+  for (int i = 0; i < n; ++i) {
+    const Vec3 p = samples.position(i, x);
+    // Bullet's bounding box of the shape, then the clearance known from the last query in the collider's frame.
+    if (p.x() < lo.x() || p.y() < lo.y() || p.z() < lo.z() || p.x() > hi.x() || p.y() > hi.y() || p.z() > hi.z())
+      continue;
+    const Vec3 local = pose.rotation.transpose() * (p - pose.position);
+    double& clearance = c.cache_clearance[std::size_t(i)];
+    if (clearance > 0.0 && (local - c.cache_local[std::size_t(i)]).norm() < clearance) continue;
+    Vec3 normal = Vec3::UnitZ();
+    // A sample already inside a triangle mesh is followed with a deeper search, so that a tool pressing on keeps it.
+    double& last = c.last_depth[std::size_t(i)];
+    const double d = signed_distance(c, tr, p, std::max(depth, 2.0 * last), normal, clearance);
+    c.cache_local[std::size_t(i)] = local;
+    last = d < 0.0 ? -d : 0.0;
+    if (!(d < 0.0)) continue;
+    sim::Contact k;
+    k.dofs.assign(samples.dofs.begin() + samples.begin[std::size_t(i)],
+                  samples.dofs.begin() + samples.begin[std::size_t(i) + 1]);
+    k.normal = normal;
+    k.penetration = -d;
+    k.stiffness = stiffness * samples.area[std::size_t(i)];
+    k.damping = scene.contact.damping * k.stiffness;
+    k.friction = c.friction;
+    if (c.dynamic) k.rigid_velocity = from_bt(c.body->getVelocityInLocalPoint(bt(p) - com));
+    else if (c.kinematic && dt > 0.0) k.rigid_velocity = (pose_next.apply(local) - p) / dt;
+    (void)v;
+    c.state.max_penetration = std::max(c.state.max_penetration, -d);
+    out.push_back(std::move(k));
+    refs.push_back({ci, p});
+  }
+}
+
+std::vector<sim::Contact> ContactWorld::find(const sim::ContactSamples& samples, const std::vector<Vec3>& x,
+                                             const std::vector<Vec3>& v, double t, double dt,
+                                             const std::vector<sim::Pose>& tool_now,
+                                             const std::vector<sim::Pose>& tool_next) {
+  const auto t0 = sim::Clock::now();
+  if (std::size_t(samples.size()) != m->samples) reset_samples();
+  m->samples = std::size_t(samples.size());
+  std::vector<sim::Contact> out;
+  m->refs.clear();
+  for (std::size_t ci = 0; ci < m->colliders.size(); ++ci) {
+    m->colliders[ci].state.max_penetration = 0.0;
+    m->query(ci, samples, x, v, t, dt, tool_now, tool_next, out);
+    m->max_penetration = std::max(m->max_penetration, m->colliders[ci].state.max_penetration);
+  }
+  m->profile.queries = sim::ms_since(t0);
+  return out;
+}
+
+void ContactWorld::finish(const std::vector<sim::ContactOutcome>& outcomes, double t, double dt,
+                          const std::vector<sim::Pose>& tool_next) {
+  const auto t0 = sim::Clock::now();
+  for (Collider& c : m->colliders) c.force = c.torque = Vec3::Zero();
+  // Outcomes are missing when the step failed at the smallest dt: no force then.
+  const std::size_t n = outcomes.size() == m->refs.size() ? outcomes.size() : 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Impl::ContactRef& r = m->refs[i];
+    Collider& c = m->colliders[r.collider];
+    const sim::ContactOutcome& o = outcomes[i];
+    c.force -= o.force;
+    if (c.dynamic) c.torque += (r.point - from_bt(c.body->getCenterOfMassPosition())).cross(-o.force);
+  }
+  // Two-way coupling: the dynamic bodies get the tissue's force; kinematic ones move to their pose at t + dt.
+  for (Collider& c : m->colliders) {
+    if (c.dynamic) {
+      c.body->applyCentralForce(bt(c.force));
+      c.body->applyTorque(bt(c.torque));
+    } else if (c.kinematic) {
+      c.motion->setWorldTransform(bt(m->pose_at(c, t + dt, tool_next)));
+    }
+  }
+  m->world.stepSimulation(btScalar(dt), 0);
+  for (std::size_t i = 0; i < m->colliders.size(); ++i) {
+    Collider& c = m->colliders[i];
+    ColliderState& s = m->states[i];
+    s = c.state;
+    s.force = {c.force.x(), c.force.y(), c.force.z()};
+    s.max_force = std::max(c.state.max_force, c.force.norm());
+    c.state.max_force = s.max_force;
+    s.pose = m->pose_at(c, t + dt, tool_next);
+    const Vec3 vel = c.dynamic ? from_bt(c.body->getLinearVelocity()) : Vec3::Zero();
+    s.velocity = {vel.x(), vel.y(), vel.z()};
+  }
+  m->refs.clear();
+  m->profile.rigid = sim::ms_since(t0);
+}
+
+void ContactWorld::reset_samples() {
+  for (Collider& c : m->colliders) {
+    c.cache_local.clear();
+    c.cache_clearance.clear();
+    c.last_depth.clear();
+  }
+}
+
+const std::vector<ColliderState>& ContactWorld::colliders() const { return m->states; }
+const ContactProfile& ContactWorld::profile() const { return m->profile; }
+double ContactWorld::max_penetration() const { return m->max_penetration; }
+
+double ContactWorld::rigid_energy() const {
+  double e = 0.0;
+  const btVector3 g = m->world.getGravity();
+  for (const Collider& c : m->colliders) {
+    if (!c.dynamic) continue;
+    const btRigidBody& b = *c.body;
+    const double mass = 1.0 / b.getInvMass();
+    const btVector3 w = b.getAngularVelocity();
+    const btVector3 iw = b.getInvInertiaTensorWorld().inverse() * w;
+    e += 0.5 * mass * b.getLinearVelocity().length2() + 0.5 * w.dot(iw) - mass * g.dot(b.getCenterOfMassPosition());
+  }
+  return e;
+}
+
+}  // namespace octocut::engine

@@ -1,0 +1,205 @@
+// Tissue-side contact: collision samples on S and the contact term of the implicit step. See contact.hpp.
+#include "octocut/sim/contact.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include "octocut/sim/embedding.hpp"
+
+namespace octocut::sim {
+
+namespace {
+
+// Adds `w` times the row [b, e) of `src` to `row`, merging equal DOFs.
+void add_row(std::map<int, double>& row, const std::vector<int>& dof, const std::vector<double>& weight, int b, int e,
+             double w) {
+  for (int i = b; i < e; ++i) row[dof[std::size_t(i)]] += w * weight[std::size_t(i)];
+}
+
+// The composed DOF row of a point embedded in a leaf: trilinear weights through the leaf's 8 rows of P.
+void leaf_row(const ObjectModel& model, const PointEmbedding& e, std::map<int, double>& row) {
+  const DofMap& dm = model.dofs();
+  for (int k = 0; k < 8; ++k) {
+    const double w = e.weights[std::size_t(k)];
+    if (w == 0.0) continue;
+    const int s = 8 * e.leaf + k;
+    add_row(row, dm.slot_dof, dm.slot_weight, dm.slot_begin[std::size_t(s)], dm.slot_begin[std::size_t(s) + 1], w);
+  }
+}
+
+// Appends one sample.
+void push_sample(ContactSamples& out, const Vec3& rest, double area, int face, const std::map<int, double>& row) {
+  out.rest.push_back(rest);
+  out.area.push_back(area);
+  out.face.push_back(face);
+  for (const auto& [d, w] : row)
+    if (w != 0.0) out.dofs.push_back({d, w});
+  out.begin.push_back(int(out.dofs.size()));
+}
+
+// The entry (r, c) of A's pattern, or null.
+double* entry(SpMat& A, int r, int c) {
+  const int* outer = A.outerIndexPtr();
+  const int* inner = A.innerIndexPtr();
+  const int* b = inner + outer[c];
+  const int* e = inner + outer[c + 1];
+  const int* it = std::lower_bound(b, e, r);
+  return (it != e && *it == r) ? A.valuePtr() + (it - inner) : nullptr;
+}
+
+// Adds the 3x3 block B at block (i, j) of A; false when the block is outside the pattern.
+bool add_block(SpMat& A, int i, int j, const Mat3& B) {
+  for (int c = 0; c < 3; ++c) {
+    double* col = entry(A, 3 * i, 3 * j + c);
+    if (!col) return false;
+    // Rows 3i, 3i+1, 3i+2 of a column are adjacent in the pattern (blocks are dense).
+    for (int r = 0; r < 3; ++r) col[r] += B(r, c);
+  }
+  return true;
+}
+
+// The stiffness K and damping C (3x3) of one contact and its force f0 before the velocity terms, for the relative
+// velocity `rel` (sample minus rigid point) at the start of the step. Returns true when it slides.
+bool contact_terms(const Contact& c, const Vec3& rel, Mat3& K, Mat3& C, Vec3& f0) {
+  const Mat3 nn = c.normal * c.normal.transpose();
+  const double fn = c.stiffness * std::max(0.0, c.penetration);  // normal force at the start, N
+  K = c.stiffness * nn;
+  C = c.damping * nn;
+  f0 = fn * c.normal;
+  const Vec3 rel_t = rel - c.normal.dot(rel) * c.normal;
+  const double speed = rel_t.norm();
+  if (c.friction <= 0.0) return false;
+  // Coulomb's force friction * fn against the tangential motion, as an implicit viscous force whose coefficient is
+  // taken at the start speed (at least kStickSpeed): exact while the speed holds, and it can slow the motion to a
+  // stop but never reverse it within a step.
+  C += (c.friction * fn / std::max(speed, kStickSpeed)) * (Mat3::Identity() - nn);
+  return speed >= kStickSpeed;
+}
+
+Vec3 row_value(const std::vector<ContactDof>& row, const std::vector<Vec3>& x) {
+  Vec3 p = Vec3::Zero();
+  for (const ContactDof& d : row) p += d.weight * x[std::size_t(d.dof)];
+  return p;
+}
+
+}  // namespace
+
+Vec3 ContactSamples::position(int i, const std::vector<Vec3>& x) const {
+  Vec3 p = Vec3::Zero();
+  for (int k = begin[std::size_t(i)]; k < begin[std::size_t(i) + 1]; ++k)
+    p += dofs[std::size_t(k)].weight * x[std::size_t(dofs[std::size_t(k)].dof)];
+  return p;
+}
+
+// function-length: one pass over S's vertices and faces, each a few lines
+ContactSamples build_contact_samples(const ObjectModel& model, const TriMesh& surface,
+                                     const SurfaceEmbedding& embedding, double resolution) {
+  ContactSamples out;
+  out.begin.push_back(0);
+  const std::size_t nv = surface.vertices.size();
+  // Divisions per face, and the area each vertex gets from the faces that are not subdivided.
+  std::vector<int> divisions(surface.triangles.size(), 1);
+  std::vector<double> vertex_area(nv, 0.0);
+  for (std::size_t f = 0; f < surface.triangles.size(); ++f) {
+    const auto& t = surface.triangles[f];
+    const Vec3 a = surface.vertices[std::size_t(t[0])], b = surface.vertices[std::size_t(t[1])],
+               c = surface.vertices[std::size_t(t[2])];
+    const double area = 0.5 * (b - a).cross(c - a).norm();
+    const double edge = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
+    const int n = resolution > 0.0 ? std::clamp(int(std::ceil(edge / resolution - 1e-9)), 1, 256) : 1;
+    divisions[f] = n;
+    // Each of the n^2 sub-triangles lumps a third of its area on each of its corners; the face's own corners
+    // belong to one sub-triangle each.
+    for (int k = 0; k < 3; ++k) vertex_area[std::size_t(t[std::size_t(k)])] += area / (3.0 * n * n);
+  }
+  const std::vector<int>& vb = embedding.dof_begin();
+  const std::vector<int>& vd = embedding.dof_index();
+  const std::vector<double>& vw = embedding.dof_weight();
+  for (std::size_t v = 0; v < nv; ++v) {
+    std::map<int, double> row;
+    add_row(row, vd, vw, vb[v], vb[v + 1], 1.0);
+    push_sample(out, surface.vertices[v], vertex_area[v], -1, row);
+  }
+  for (std::size_t f = 0; f < surface.triangles.size(); ++f) {
+    const int n = divisions[f];
+    if (n == 1) continue;
+    const auto& t = surface.triangles[f];
+    const Vec3 a = surface.vertices[std::size_t(t[0])], b = surface.vertices[std::size_t(t[1])],
+               c = surface.vertices[std::size_t(t[2])];
+    const double sub = 0.5 * (b - a).cross(c - a).norm() / double(n * n);  // area of one sub-triangle, m^2
+    for (int i = 0; i <= n; ++i) {
+      for (int j = 0; i + j <= n; ++j) {
+        const int k = n - i - j;
+        if (i == n || j == n || k == n) continue;  // the face's corners: vertex samples
+        // Sub-triangles meeting at the grid point: 6 inside, 3 on an edge.
+        const bool on_edge = i == 0 || j == 0 || k == 0;
+        const double area = (on_edge ? 3.0 : 6.0) * sub / 3.0;
+        const double l0 = double(k) / n, l1 = double(i) / n, l2 = double(j) / n;
+        const Vec3 p = l0 * a + l1 * b + l2 * c;
+        std::map<int, double> row;
+        if (const auto e = model.embed(p)) {
+          leaf_row(model, *e, row);
+        } else {
+          const double l[3] = {l0, l1, l2};
+          for (int q = 0; q < 3; ++q) {
+            const std::size_t vq = std::size_t(t[std::size_t(q)]);
+            add_row(row, vd, vw, vb[vq], vb[vq + 1], l[q]);
+          }
+        }
+        push_sample(out, p, area, int(f), row);
+      }
+    }
+  }
+  return out;
+}
+
+void add_contact_terms(const std::vector<Contact>& contacts, double dt, const std::vector<Vec3>& v,
+                       const std::vector<char>& constrained, const VecX& dv_c, SpMat& A, VecX& rhs) {
+  for (const Contact& c : contacts) {
+    Mat3 K, C;
+    Vec3 f0;
+    const Vec3 rel = row_value(c.dofs, v) - c.rigid_velocity;
+    contact_terms(c, rel, K, C, f0);
+    const Mat3 S = dt * dt * K + dt * C;  // the system matrix block of a unit row
+    const Vec3 f = dt * (f0 - (dt * K + C) * rel);
+    for (const ContactDof& p : c.dofs) {
+      if (constrained[std::size_t(p.dof)]) continue;
+      rhs.segment<3>(3 * p.dof) += p.weight * f;
+      for (const ContactDof& q : c.dofs) {
+        const Mat3 B = (p.weight * q.weight) * S;
+        if (constrained[std::size_t(q.dof)]) {
+          // Free row, prescribed column: to the right-hand side.
+          rhs.segment<3>(3 * p.dof) -= B * dv_c.segment<3>(3 * q.dof);
+        } else if (!add_block(A, p.dof, q.dof, B)) {
+          // Outside the pattern (a row that spans leaves, as a vertex outside every leaf has): lump onto the two
+          // diagonals with |w_p w_q|. With the mirrored pair this adds |w_p w_q| (e_p -+ e_q)(e_p -+ e_q)^T (x) S
+          // >= 0 to the exact term, so A stays symmetric positive definite whatever the weights' signs.
+          const Mat3 L = (0.5 * std::abs(p.weight * q.weight)) * S;
+          add_block(A, p.dof, p.dof, L);
+          add_block(A, q.dof, q.dof, L);
+        }
+      }
+    }
+  }
+}
+
+std::vector<ContactOutcome> contact_outcomes(const std::vector<Contact>& contacts, double dt,
+                                             const std::vector<Vec3>& v, const VecX& dv) {
+  std::vector<ContactOutcome> out(contacts.size());
+  for (std::size_t i = 0; i < contacts.size(); ++i) {
+    const Contact& c = contacts[i];
+    Mat3 K, C;
+    Vec3 f0;
+    const Vec3 rel0 = row_value(c.dofs, v) - c.rigid_velocity;
+    out[i].sliding = contact_terms(c, rel0, K, C, f0);
+    Vec3 dv_s = Vec3::Zero();
+    for (const ContactDof& d : c.dofs) dv_s += d.weight * dv.segment<3>(3 * d.dof);
+    const Vec3 rel = rel0 + dv_s;  // at the end of the step
+    out[i].force = f0 - (dt * K + C) * rel;
+    out[i].penetration = c.penetration - dt * c.normal.dot(rel);
+  }
+  return out;
+}
+
+}  // namespace octocut::sim

@@ -1,0 +1,142 @@
+// The tissue side of contact (sim/contact.hpp), without any rigid-body library: the collision samples against exact
+// areas and the embedding, and a block resting on the plane z = 0 whose contacts the test finds itself, against
+// m g, also with a penalty far too stiff for any explicit step (the stiffness is in the implicit system).
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "octocut/sim/contact.hpp"
+#include "octocut/sim/embedding.hpp"
+#include "octocut/sim/primitives.hpp"
+#include "octocut/sim/simulator.hpp"
+#include "test_util.hpp"
+
+namespace octocut::sim {
+namespace {
+
+const Box3 kBox{Vec3(0, 0, 0), Vec3(0.01, 0.01, 0.01)};
+
+MaterialParams soft() {
+  MaterialParams p;
+  p.young_modulus = 2e4;
+  p.poisson_ratio = 0.3;
+  p.density = 1000.0;
+  return p;
+}
+
+TEST(ContactSamples, CoverTheSurfaceAreaAndFollowTheEmbedding) {
+  const ObjectModel m = test::box_model(kBox, Vec3(0, 0, 0), 0.01, 2, {}, {}, soft());
+  const TriMesh s = box_face_grids(kBox, 1);
+  const SurfaceEmbedding e(m, s);
+  const ContactSamples samples = build_contact_samples(m, s, e, 0.0025);
+  // The box's 6 faces of 1 cm^2, whatever the sampling.
+  double area = 0.0;
+  for (double a : samples.area) area += a;
+  EXPECT_NEAR(area, 6e-4, 1e-15);
+  EXPECT_GT(samples.size(), int(s.num_vertices()));  // faces larger than the resolution get points
+  // At rest every sample is where it was put (the embedding reproduces positions).
+  const SimState rest = SimState::rest(m);
+  for (int i = 0; i < samples.size(); ++i)
+    EXPECT_LT((samples.position(i, rest.x) - samples.rest[std::size_t(i)]).norm(), 1e-12) << i;
+  // Without subdivision only the vertices remain.
+  EXPECT_EQ(build_contact_samples(m, s, e, 1.0).size(), int(s.num_vertices()));
+}
+
+// Steps the block on the plane z = 0 (contacts found here: every sample below it) for `seconds`; returns the total
+// contact force of the last step, N, and in `deepest` the deepest sample at its start, m.
+Vec3 rest_on_plane(double stiffness, double dt, double seconds, StabilityStats& stats, double& deepest) {
+  const ObjectModel m = test::box_model(kBox, Vec3(0, 0, 0), 0.01, 2, {}, {}, soft());
+  const TriMesh s = box_face_grids(kBox, 4);
+  const SurfaceEmbedding e(m, s);
+  const ContactSamples samples = build_contact_samples(m, s, e, 0.0025);
+  SimulatorOptions o;
+  o.dt = dt;
+  o.threads = 1;
+  o.linear_solver = "cholmod";
+  Simulator sim(m, o);
+  Vec3 total = Vec3::Zero();
+  deepest = 0.0;
+  for (int step = 0; step * dt < seconds; ++step) {
+    std::vector<Contact> contacts;
+    deepest = 0.0;
+    for (int i = 0; i < samples.size(); ++i) {
+      const Vec3 p = samples.position(i, sim.state().x);
+      if (!(p.z() < 0.0)) continue;
+      Contact c;
+      c.dofs.assign(samples.dofs.begin() + samples.begin[std::size_t(i)],
+                    samples.dofs.begin() + samples.begin[std::size_t(i) + 1]);
+      c.normal = Vec3::UnitZ();
+      c.penetration = -p.z();
+      c.stiffness = stiffness * samples.area[std::size_t(i)];
+      c.damping = 1e-3 * c.stiffness;
+      c.friction = 0.5;
+      deepest = std::max(deepest, c.penetration);
+      contacts.push_back(std::move(c));
+    }
+    sim.set_contacts(std::move(contacts));
+    sim.step();
+    total.setZero();
+    for (const ContactOutcome& oc : sim.contact_outcomes()) total += oc.force;
+  }
+  stats = sim.stats();
+  return total;
+}
+
+TEST(ContactTerm, ABlockOnAPlaneCarriesItsWeight) {
+  StabilityStats stats;
+  double deepest = 0.0;
+  const Vec3 f = rest_on_plane(2e8, 0.002, 0.4, stats, deepest);
+  const double weight = 1000.0 * 1e-6 * 9.81;  // N
+  EXPECT_NEAR(f.z(), weight, 0.005 * weight);
+  EXPECT_LT(std::hypot(f.x(), f.y()), 1e-3 * weight);
+  EXPECT_LT(deepest, 0.01 * 0.01);
+  EXPECT_EQ(stats.recoveries, 0);
+}
+
+TEST(ContactTerm, APenaltyFarTooStiffForAnExplicitStepIsStable) {
+  // k = 1e12 Pa/m: a sample of 6 mm^2 and 0.1 g would need dt < 2 sqrt(m / k) = 8 us explicitly; here dt = 2 ms.
+  StabilityStats stats;
+  double deepest = 0.0;
+  const Vec3 f = rest_on_plane(1e12, 0.002, 0.2, stats, deepest);
+  const double weight = 1000.0 * 1e-6 * 9.81;
+  EXPECT_EQ(stats.recoveries, 0);
+  EXPECT_EQ(stats.failed_steps, 0);
+  EXPECT_TRUE(std::isfinite(f.z()));
+  EXPECT_NEAR(f.z(), weight, 0.02 * weight);
+  EXPECT_LT(deepest, 1e-6);
+}
+
+TEST(ContactTerm, AContactThatBlowsUpIsRolledBackAndCounted) {
+  // Every sample of the block 5 mm deep in a 1e12 Pa/m penalty: the step would fling it off far above the speed
+  // guard, so the attempt is rejected, retried with halved steps (each half from the penetration the last left),
+  // and counted; the state stays finite.
+  const ObjectModel m = test::box_model(kBox, Vec3(0, 0, 0), 0.01, 2, {}, {}, soft());
+  const TriMesh s = box_face_grids(kBox, 2);
+  const SurfaceEmbedding e(m, s);
+  const ContactSamples samples = build_contact_samples(m, s, e, 0.0025);
+  SimulatorOptions o;
+  o.dt = 0.002;
+  o.threads = 1;
+  o.linear_solver = "cholmod";
+  o.max_speed = 1.0;
+  Simulator sim(m, o);
+  std::vector<Contact> contacts;
+  for (int i = 0; i < samples.size(); ++i) {
+    Contact c;
+    c.dofs.assign(samples.dofs.begin() + samples.begin[std::size_t(i)],
+                  samples.dofs.begin() + samples.begin[std::size_t(i) + 1]);
+    c.normal = Vec3::UnitZ();
+    c.penetration = 0.005;
+    c.stiffness = 1e12 * samples.area[std::size_t(i)];
+    contacts.push_back(std::move(c));
+  }
+  sim.set_contacts(contacts);
+  sim.step();
+  EXPECT_GT(sim.stats().speed_limit, 0);
+  EXPECT_EQ(sim.stats().recoveries + sim.stats().failed_steps, 1);
+  for (const Vec3& v : sim.state().v) EXPECT_TRUE(v.allFinite());
+  EXPECT_NEAR(sim.state().t, 0.002, 1e-15);
+}
+
+}  // namespace
+}  // namespace octocut::sim

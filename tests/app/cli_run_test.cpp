@@ -14,6 +14,7 @@
 #include <numbers>
 #include <string>
 
+#include "common/report_util.hpp"
 #include "common/cli_util.hpp"
 #include "common/temp_dir.hpp"
 #include "octocut/engine/io/mesh_io.hpp"
@@ -69,11 +70,7 @@ TEST_F(CliRunTest, SameSceneGivesBitIdenticalReportsApartFromTimings) {
   auto run = [&](const std::string& out) {
     const CommandResult r = run_octocut("run '" + scene.string() + "' --quiet --out '" + (m_dir / out).string() + "'");
     EXPECT_EQ(r.exit_code, 0) << r.output;
-    json rep = read_json(m_dir / out / "report.json");
-    rep.erase("timing_ms");
-    rep.erase("wall_time_s");
-    rep.erase("realtime_factor");
-    return rep.dump();
+    return octocut::test::report_without_timings(read_json(m_dir / out / "report.json"));
   };
   const std::string a = run("a"), b = run("b");
   EXPECT_EQ(a, b);

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "common/report_util.hpp"
 #include "common/cli_util.hpp"
 #include "common/temp_dir.hpp"
 #include "octocut/engine/run/session.hpp"
@@ -28,17 +29,12 @@ json read_json(const fs::path& p) {
   return json::parse(in);
 }
 
-// The report without its timing keys (the wall time, the timing block and each cut's stage timings).
-std::string without_timings(json report) {
-  report.erase("timing_ms");
-  report.erase("wall_time_s");
-  for (json& c : report["cuts"]) c.erase("ms");
-  return report.dump();
-}
+// The report without its timing keys.
+std::string without_timings(const json& report) { return test::report_without_timings(report); }
 
 class CliSessionTest : public test::TempDirTest {
  protected:
-  // The meniscus punch scene without drawing, its paths absolute, copied into the test folder.
+  // The meniscus punch scene without drawing and without contact, its paths absolute, copied into the test folder.
   fs::path meniscus() const {
     json scene = read_json(std::string(OCTOCUT_SOURCE_DIR) + "/assets/scenes/meniscus_punch.json");
     const std::string meshes = std::string(OCTOCUT_SOURCE_DIR) + "/assets/meshes/";
@@ -47,6 +43,7 @@ class CliSessionTest : public test::TempDirTest {
     scene["tools"][0]["mesh"] = meshes + "punch.ply";
     scene["render"]["enabled"] = false;
     scene["render"]["props"] = json::array();
+    scene["tools"][0]["collide"] = false;  // the punch cuts where it is put, without pushing the rim away first
     return write("meniscus.json", scene.dump(1));
   }
 

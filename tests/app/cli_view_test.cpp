@@ -147,14 +147,14 @@ TEST_F(CliViewTest, MouseCutRecordReplayAndScreenshot) {
   const fs::path record = m_dir / "s.json", out = m_dir / "o";
   m_viewer = std::make_unique<Child>(
       std::vector<std::string>{OCTOCUT_EXE, "view", scene, "--set", "/solver/gravity=[0,0,0]", "--set",
-                               "/render/props=[]", "--set", "/render/camera/arthroscope=false", "--set",
+                               "/render/props=[]", "--set", "/tools/0/collide=false", "--set", "/render/camera/arthroscope=false", "--set",
                                "/render/camera/mask=false", "--set", "/render/camera/position=[0,-0.002,0.045]", "--set",
                                "/render/camera/target=[0,-0.002,0]", "--set", "/render/camera/up=[0,1,0]", "--set",
                                "/render/camera/fov_deg=45", "--record", record.string(), "--out", out.string(),
                                "--size", std::to_string(kWidth) + "x" + std::to_string(kHeight)},
       std::vector<std::string>{"DISPLAY=" + m_xvfb->display(), "LIBGL_ALWAYS_SOFTWARE=1"}, m_dir / "view.log");
-  // Without gravity the meniscus stays at rest, so that the images do not depend on when they were taken; seen from
-  // above without the knee, so that the hole shows. The overrides are recorded in the session, and the replay
+  // Without gravity, and with the punch not colliding, the meniscus stays at rest, so that the images do not depend on
+  // when they were taken; seen from above without the knee, so that the hole shows. The overrides are recorded in the session, and the replay
   // applies them. The window, then its first status line.
   const std::string window = xdotool("search --sync --onlyvisible --name 'octocut'");
   ASSERT_FALSE(window.empty()) << log();

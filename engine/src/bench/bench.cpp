@@ -396,6 +396,8 @@ std::vector<Entry> registry() {
           {"cut/uniform_cut", [] { return bench_cut("uniform_cut"); }}};
 }
 
+}  // namespace
+
 std::string cpu_name() {
   std::ifstream in("/proc/cpuinfo");
   std::string line;
@@ -407,6 +409,8 @@ std::string cpu_name() {
   }
   return "unknown";
 }
+
+namespace {
 
 }  // namespace
 

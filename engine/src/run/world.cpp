@@ -19,6 +19,7 @@
 #include "octocut/sim/primitives.hpp"
 #include "octocut/sim/surface_check.hpp"
 #include "octocut/sim/timing.hpp"
+#include "stability_track.hpp"
 
 namespace octocut::engine {
 
@@ -98,6 +99,7 @@ struct World::Impl {
 
   std::vector<CutSummary> cuts;
   std::vector<std::string> warnings;
+  std::optional<StabilityTracker> track;  // output.stability_track
 
   Impl(const Scene& s, const WorldOptions& o);
   void load_tools();
@@ -109,6 +111,7 @@ struct World::Impl {
   CutSummary cut(std::size_t tool, double t, bool scheduled);
   void run_due_cuts(std::vector<CutSummary>& out);
   [[nodiscard]] sim::Pose tool_pose(std::size_t tool, double t) const;
+  [[nodiscard]] bool handles_move_after(double t) const;
   void record_counts(Report& r) const;
   void record_state(Report& r) const;
 };
@@ -136,6 +139,10 @@ World::Impl::Impl(const Scene& s, const WorldOptions& o)
   sim = std::make_unique<sim::Simulator>(std::move(built.model), simulator_options(scene));
   check_start();
   bind_surface();
+  if (scene.output.stability_track) {
+    track.emplace();
+    track->start(*sim, to_vec3(scene.solver.gravity));
+  }
 }
 
 void World::Impl::load_props() {
@@ -300,6 +307,13 @@ void World::Impl::record_counts(Report& r) const {
   r.rest_volume_m3 = sim::signed_volume(surface);
 }
 
+// True when a handle has a keyframe later than t (s): it moves, or may move, after t and so puts work in.
+bool World::Impl::handles_move_after(double t) const {
+  for (const Handle& h : scene.object.handles)
+    if (!h.keyframes.empty() && h.keyframes.back().t > t) return true;
+  return false;
+}
+
 void World::Impl::record_state(Report& r) const {
   // Probes, energies and the stability counters of the current state.
   const sim::ObjectModel& m = sim->model();
@@ -324,6 +338,7 @@ void World::Impl::record_state(Report& r) const {
   r.kinetic_j = sim->kinetic_energy();
   r.elastic_j = sim->elastic_energy();
   r.sim_time_s = sim->state().t;
+  if (track) r.track = track->result();
   if (st.failed_steps > 0)
     r.warnings.push_back(std::to_string(st.failed_steps) +
                          " steps failed at the smallest dt and were reset (velocities zeroed)");
@@ -341,10 +356,12 @@ World& World::operator=(World&&) noexcept = default;
 StepResult World::step() {
   const auto t0 = sim::Clock::now();
   StepResult r;
+  const double t_start = m->sim->state().t;
   m->run_due_cuts(r.cuts);
   m->sim->step();  // an object cut away entirely only advances time (sim::Simulator::remove_object)
   m->update_surface();
   m->run_due_cuts(r.cuts);
+  if (m->track) m->track->after_step(*m->sim, r.cuts.empty() && !m->handles_move_after(t_start));
   ++m->steps;
   r.t = m->sim->state().t;
   r.ms = sim::ms_since(t0);

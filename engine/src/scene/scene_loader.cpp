@@ -520,6 +520,7 @@ Scene to_scene(const json& document, const std::string& file) {
   scene.output.frames = document["output"]["frames"].get<bool>();
   scene.output.surface_final = document["output"]["surface_final"].get<bool>();
   scene.output.surface_every = document["output"]["surface_every"].get<int>();
+  scene.output.stability_track = document["output"]["stability_track"].get<bool>();
   // The expected block stays JSON text (validated by the schema); see expected.hpp.
   if (document.contains("expected")) scene.expected_json = document["expected"].dump();
   return scene;

@@ -357,7 +357,13 @@ Entry make_scene_schema() {
                                     "on which cuts show as holes) and the final deformed surface (`surface_final.ply`)."),
                             integer("surface_every", 0, closed(0, max_int),
                                     "Write the deformed surface every N steps as `surfaces/surface_<step>.ply` "
-                                    "(6 digits, binary PLY, metres), and the rest surface once; 0: never.")},
+                                    "(6 digits, binary PLY, metres), and the rest surface once; 0: never."),
+                            boolean("stability_track", false,
+                                    "Track the run's stability every step (an energy evaluation per step) and report "
+                                    "`stability.track`: the largest rise of the total mechanical energy (kinetic + "
+                                    "elastic + gravitational) over a step in which no handle moved and no cut ran, J; "
+                                    "the largest DOF displacement seen, m; and the change of the deformed material "
+                                    "volume, final and extreme, relative to rest (`octocut study stability`).")},
                            "Files the run writes besides the report."),
                     std::move(expected),
                 },

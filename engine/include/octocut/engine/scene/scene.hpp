@@ -142,6 +142,7 @@ struct OutputSettings {
   bool frames = false;
   bool surface_final = false;
   int surface_every = 0;
+  bool stability_track = false;  ///< report stability.track (energy, displacement, volume every step)
 };
 
 /// A cylindrical blade in tool coordinates: axis z, centred on the tool origin (`tools[]/blade/cylinder`).

@@ -236,13 +236,13 @@ std::string plot_script(const ojson& ref, const std::string& name, const std::ve
     << "set title \"Accuracy against cost: " << name << "\\nreference: "
     << (ref.at("kind") == "richardson" ? "Richardson extrapolation (" + ref.at("element").get<std::string>() + ")"
                                        : ref.at("kind").get<std::string>())
-    << "\"\nset logscale xy\nset grid\nset key top right\n"
+    << "\" noenhanced\nset logscale xy\nset grid\nset key top right\n"
     << "set xlabel 'median wall time per step (ms)'\n"
     << "set ylabel 'relative probe error |u - u_{ref}| / |u_{ref}| (max over probes)'\n"
     << "set datafile separator ','\n"
     << "plot 'pareto.dat' using 1:2 with points pt 7 ps 1.2 lc rgb '#4477aa' title 'case', \\\n"
     << "     'pareto_front.dat' using 1:2 with linespoints pt 6 ps 2.2 lw 2 lc rgb '#cc3311' title 'Pareto front', \\\n"
-    << "     'pareto.dat' using 1:2:3 with labels font 'sans,7' offset 0.6,0.5 left rotate by 20 notitle\n";
+    << "     'pareto.dat' using 1:2:3 with labels font 'sans,7' offset 0.6,0.5 left rotate by 20 noenhanced notitle\n";
   return g.str();
 }
 

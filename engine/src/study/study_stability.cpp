@@ -110,6 +110,13 @@ int index_of(const ojson& list, const ojson& v) {
   return -1;
 }
 
+// A modulus as 1e+04.
+std::string exp_text(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.0e", v);
+  return b;
+}
+
 // The heatmaps: one panel per scenario, (E, nu) across, dt up; data files stability_<scenario>.dat.
 std::string plot_script(const Plan& plan, const std::vector<Cell>& cells, const fs::path& out) {
   const ojson& s = plan.settings;
@@ -127,14 +134,14 @@ std::string plot_script(const Plan& plan, const std::vector<Cell>& cells, const 
   std::ostringstream g;
   g << "set terminal pngcairo size 1400," << 150 + 260 * scen.size() << " font 'sans,10'\nset output out\n"
     << "set multiplot layout " << scen.size() << ",1 title \"Stability matrix: " << fs::path(plan.scene).stem().string()
-    << " (level " << s["level"] << ", " << num_text(s["duration"]) << " s per cell)\" font 'sans,13'\n"
+    << " (level " << s["level"] << ", " << num_text(s["duration"]) << " s per cell)\" font 'sans,13' noenhanced\n"
     << "set palette defined (0 '#228833', 1 '#99cc66', 2 '#ccbb44', 3 '#ee7733', 4 '#cc3311', 5 '#661100', 6 '#bbbbbb')\n"
-    << "set cbrange [-0.5:6.5]\nset cbtics (";
+    << "set palette maxcolors 7\nset cbrange [-0.5:6.5]\nset cbtics (";
   for (std::size_t v = 0; v < kVerdicts.size(); ++v) g << (v ? ", " : "") << "'" << kVerdicts[v] << "' " << v;
   g << ")\nset xrange [-0.5:" << nx - 0.5 << "]\nset yrange [-0.5:" << dt.size() - 0.5 << "]\nset xtics (";
   for (std::size_t i = 0; i < E.size(); ++i)
     for (std::size_t j = 0; j < nu.size(); ++j)
-      g << (i + j ? ", " : "") << "'E " << num_text(E[i]) << " Pa, ν " << num_text(nu[j]) << "' " << i * nu.size() + j;
+      g << (i + j ? ", " : "") << "'E " << exp_text(E[i]) << " Pa, ν " << num_text(nu[j]) << "' " << i * nu.size() + j;
   g << ") rotate by 35 right font 'sans,7'\nset ytics (";
   for (std::size_t i = 0; i < dt.size(); ++i) g << (i ? ", " : "") << "'" << num_text(dt[i]) << "' " << i;
   g << ")\nset ylabel 'time step Δt (s)'\nset xlabel 'Young modulus E (Pa) and Poisson ratio ν'\nunset key\n";

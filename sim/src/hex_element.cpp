@@ -1,6 +1,7 @@
 #include "octocut/sim/hex_element.hpp"
 
 #include <Eigen/SVD>
+#include <array>
 #include <cmath>
 
 namespace octocut::sim {
@@ -42,6 +43,69 @@ Mat24 unit_hex_stiffness(double nu) {
     K.noalias() += 0.125 * B.transpose() * D * B;
   }
   return K;
+}
+
+namespace {
+// Isotropic elasticity for E = 1 in Voigt order (xx, yy, zz, xy, yz, zx) with engineering shear strains.
+Eigen::Matrix<double, 6, 6> unit_elasticity(double nu) {
+  const double lambda = nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
+  const double mu = 1.0 / (2.0 * (1.0 + nu));
+  Eigen::Matrix<double, 6, 6> D = Eigen::Matrix<double, 6, 6>::Zero();
+  D.topLeftCorner<3, 3>().setConstant(lambda);
+  D.topLeftCorner<3, 3>().diagonal().array() += 2.0 * mu;
+  D.bottomRightCorner<3, 3>().diagonal().setConstant(mu);
+  return D;
+}
+
+// Strain-displacement matrix B (6 x 24) of the unit cube at the point xi of [0,1]^3.
+Eigen::Matrix<double, 6, 24> unit_strain_operator(const double xi[3]) {
+  Eigen::Matrix<double, 6, 24> B = Eigen::Matrix<double, 6, 24>::Zero();
+  for (int a = 0; a < 8; ++a) {
+    double f[3], df[3];
+    for (int d = 0; d < 3; ++d) {
+      const bool bit = (a >> d) & 1;
+      f[d] = bit ? xi[d] : 1.0 - xi[d];
+      df[d] = bit ? 1.0 : -1.0;
+    }
+    const double gx = df[0] * f[1] * f[2], gy = f[0] * df[1] * f[2], gz = f[0] * f[1] * df[2];
+    B(0, 3 * a + 0) = gx;
+    B(1, 3 * a + 1) = gy;
+    B(2, 3 * a + 2) = gz;
+    B(3, 3 * a + 0) = gy;
+    B(3, 3 * a + 1) = gx;
+    B(4, 3 * a + 1) = gz;
+    B(4, 3 * a + 2) = gy;
+    B(5, 3 * a + 0) = gz;
+    B(5, 3 * a + 2) = gx;
+  }
+  return B;
+}
+}  // namespace
+
+Mat24 unit_hex_stiffness_bbar(double nu) {
+  const Eigen::Matrix<double, 6, 6> D = unit_elasticity(nu);
+  const double g[2] = {0.5 - 0.5 / std::sqrt(3.0), 0.5 + 0.5 / std::sqrt(3.0)};
+  // B at the 8 Gauss points (each weighted 1/8, the cube's volume being 1) and the mean divergence row.
+  std::array<Eigen::Matrix<double, 6, 24>, 8> B;
+  Eigen::Matrix<double, 1, 24> mean_div = Eigen::Matrix<double, 1, 24>::Zero();
+  for (int q = 0; q < 8; ++q) {
+    const double xi[3] = {g[q & 1], g[(q >> 1) & 1], g[(q >> 2) & 1]};
+    B[std::size_t(q)] = unit_strain_operator(xi);
+    mean_div += 0.125 * B[std::size_t(q)].topRows<3>().colwise().sum();
+  }
+  Mat24 K = Mat24::Zero();
+  for (int q = 0; q < 8; ++q) {
+    Eigen::Matrix<double, 6, 24> Bbar = B[std::size_t(q)];
+    const Eigen::Matrix<double, 1, 24> shift = (mean_div - B[std::size_t(q)].topRows<3>().colwise().sum()) / 3.0;
+    Bbar.topRows<3>().rowwise() += shift;
+    K.noalias() += 0.125 * Bbar.transpose() * D * Bbar;
+  }
+  // Symmetric up to round-off; make it exactly so.
+  return 0.5 * (K + K.transpose());
+}
+
+Mat24 unit_hex_stiffness(double nu, HexFormulation f) {
+  return f == HexFormulation::bbar ? unit_hex_stiffness_bbar(nu) : unit_hex_stiffness(nu);
 }
 
 Mat3 hex_center_gradient(const Eigen::Matrix<double, 3, 8>& x, double h) {

@@ -286,7 +286,7 @@ void ObjectModel::set_leaves(std::vector<OccupiedCell> cells) {
 
 void ObjectModel::finish(const ObjectModel* previous, const std::vector<Cell>& material_changed) {
   const int ne = m_tree.size();
-  if (!previous) m_unit_k = unit_hex_stiffness(m_params.poisson_ratio);
+  if (!previous) m_unit_k = unit_hex_stiffness(m_params.poisson_ratio, m_params.element);
 
   // Per-element geometry and stiffness scale; the occupancy was set with the leaves.
   m_edge.resize(std::size_t(ne));

@@ -56,10 +56,11 @@ TEST(HexElement, PolarRotationIsProperForInvertedAndDegenerateGradients) {
 }
 
 // A model with hanging nodes: a box refined unevenly.
-ObjectModel hanging_model() {
+ObjectModel hanging_model(HexFormulation element = HexFormulation::trilinear) {
   MaterialParams p;
   p.young_modulus = 1e4;
   p.poisson_ratio = 0.35;
+  p.element = element;
   ObjectModel m = test::box_model({Vec3(0, 0, 0), Vec3(0.04, 0.03, 0.02)}, Vec3(0, 0, 0), 0.04, 2,
                                   {{Box3{Vec3(0, 0, 0), Vec3(0.01, 0.01, 0.01)}, 4}}, {}, p);
   return m;
@@ -102,9 +103,11 @@ double fd_stiffness_error(const FemSystem& fem, const std::vector<Vec3>& x, cons
   return max_err / max_k;
 }
 
+// The system-level tests run for both hexahedron formulations.
+class Fem : public ::testing::TestWithParam<HexFormulation> {};
 
-TEST(Fem, StiffnessMatchesFiniteDifferencesThroughP) {
-  const ObjectModel m = hanging_model();
+TEST_P(Fem, StiffnessMatchesFiniteDifferencesThroughP) {
+  const ObjectModel m = hanging_model(GetParam());
   ASSERT_GT(m.dofs().hanging_slots, 0);
   Executor ex(1);
   FemSystem fem(m, ex);
@@ -123,8 +126,8 @@ TEST(Fem, StiffnessMatchesFiniteDifferencesThroughP) {
   EXPECT_LT((kv - K * v).norm(), 1e-10 * (K * v).norm());
 }
 
-TEST(Fem, ForceIsMinusEnergyGradient) {
-  const ObjectModel m = hanging_model();
+TEST_P(Fem, ForceIsMinusEnergyGradient) {
+  const ObjectModel m = hanging_model(GetParam());
   Executor ex(1);
   FemSystem fem(m, ex);
   const std::vector<Vec3> x = perturbed(m, 3e-3, 2);
@@ -142,9 +145,9 @@ TEST(Fem, ForceIsMinusEnergyGradient) {
   }
 }
 
-TEST(Fem, FullNonlinearForceDerivativeAtARigidPoseIsTheCorotatedStiffness) {
+TEST_P(Fem, FullNonlinearForceDerivativeAtARigidPoseIsTheCorotatedStiffness) {
   // At a rigidly rotated pose the strain vanishes, so dR/dx drops out and the true Jacobian is -R K R^T.
-  const ObjectModel m = hanging_model();
+  const ObjectModel m = hanging_model(GetParam());
   Executor ex(1);
   FemSystem fem(m, ex);
   const Mat3 Q = Eigen::AngleAxisd(0.7, Vec3(0.3, -1, 0.5).normalized()).toRotationMatrix();
@@ -156,8 +159,8 @@ TEST(Fem, FullNonlinearForceDerivativeAtARigidPoseIsTheCorotatedStiffness) {
   EXPECT_LT(fd_stiffness_error(fem, x, K, 1e-7, 11, false), 1e-5);
 }
 
-TEST(Fem, RigidRotationsIncluding180DegreesGiveZeroForce) {
-  const ObjectModel m = hanging_model();
+TEST_P(Fem, RigidRotationsIncluding180DegreesGiveZeroForce) {
+  const ObjectModel m = hanging_model(GetParam());
   Executor ex(2);
   FemSystem fem(m, ex);
   VecX f_scale;
@@ -185,11 +188,13 @@ TEST(Fem, RigidRotationsIncluding180DegreesGiveZeroForce) {
   }
 }
 
-TEST(Fem, PatchTestReproducesAffineFieldWithHangingNodes) {
+TEST_P(Fem, PatchTestReproducesAffineFieldWithHangingNodes) {
   // Impose x = A X + b on the boundary DOFs of a mixed-level mesh, solve the nonlinear static problem for the
   // interior, and expect the affine field exactly with zero residual.
+  MaterialParams params;
+  params.element = GetParam();
   ObjectModel m = test::box_model({Vec3(0, 0, 0), Vec3(1, 1, 1)}, Vec3(0, 0, 0), 1.0, 2,
-                                  {{Box3{Vec3(0.3, 0.3, 0.3), Vec3(0.6, 0.6, 0.6)}, 4}});
+                                  {{Box3{Vec3(0.3, 0.3, 0.3), Vec3(0.6, 0.6, 0.6)}, 4}}, {}, params);
   ASSERT_GT(m.dofs().hanging_slots, 0);
   const Mat3 A = (Mat3() << 1.2, 0.1, 0.05, -0.1, 0.9, 0.2, 0.0, 0.15, 1.1).finished();
   const Vec3 b(0.3, -0.1, 0.2);
@@ -232,8 +237,8 @@ TEST(Fem, PatchTestReproducesAffineFieldWithHangingNodes) {
     EXPECT_LT((x[std::size_t(d)] - (A * m.dofs().dof_rest[std::size_t(d)] + b)).norm(), 1e-12);
 }
 
-TEST(Fem, ParallelAssemblyIsBitIdenticalToSerial) {
-  const ObjectModel m = hanging_model();
+TEST_P(Fem, ParallelAssemblyIsBitIdenticalToSerial) {
+  const ObjectModel m = hanging_model(GetParam());
   const std::vector<Vec3> x = perturbed(m, 2e-3, 3);
   auto run = [&](int threads) {
     Executor ex(threads);
@@ -251,6 +256,11 @@ TEST(Fem, ParallelAssemblyIsBitIdenticalToSerial) {
   EXPECT_TRUE(a.first == b.first);
   EXPECT_TRUE(a.second == b.second);
 }
+
+INSTANTIATE_TEST_SUITE_P(Elements, Fem, ::testing::Values(HexFormulation::trilinear, HexFormulation::bbar),
+                         [](const ::testing::TestParamInfo<HexFormulation>& info) {
+                           return info.param == HexFormulation::bbar ? "bbar" : "trilinear";
+                         });
 
 }  // namespace
 }  // namespace octocut::sim

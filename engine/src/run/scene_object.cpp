@@ -133,6 +133,7 @@ SceneObject build_scene_object(const Scene& scene, bool cuttable) {
   }
   sim::MaterialParams params{o.material.young_modulus, o.material.poisson_ratio, o.material.density,
                              o.material.rayleigh_mass, o.material.rayleigh_stiffness};
+  params.element = o.material.element == "bbar" ? sim::HexFormulation::bbar : sim::HexFormulation::trilinear;
   sim::ObjectModel model = [&] {
     try {
       return sim::ObjectModel::build(spec, material, params, std::move(handles));

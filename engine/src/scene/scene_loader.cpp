@@ -408,6 +408,7 @@ ObjectSettings to_object(const json& object, const std::string& file) {
   settings.material.density = material["density"].get<double>();
   settings.material.rayleigh_mass = material["rayleigh_mass"].get<double>();
   settings.material.rayleigh_stiffness = material["rayleigh_stiffness"].get<double>();
+  settings.material.element = material["element"].get<std::string>();
   settings.octree = to_octree(object["octree"], file);
   settings.material_graph_cell_size = object["material_graph"]["cell_size"].get<double>();
   settings.handles = to_handles(object["handles"], file);
@@ -499,8 +500,17 @@ RenderSettings to_render(const json& render, const std::vector<ToolSettings>& to
   return r;
 }
 
+/// True when nothing in the scene moves with time: no tool (tools are keyframed and cut on a timeline) and no handle
+/// with keyframes. Render props are scenery and do not count.
+bool time_independent(const Scene& scene) {
+  return scene.tools.empty() && std::none_of(scene.object.handles.begin(), scene.object.handles.end(),
+                                             [](const Handle& h) { return !h.keyframes.empty(); });
+}
+
 /// Converts a validated document with defaults filled in to a Scene, checking the rules that span several keys.
-Scene to_scene(const json& document, const std::string& file) {
+/// `duration_given`: the scene (or an override) set `duration`; when it did not, a static scene in which nothing
+/// moves with time solves once (duration = dt, one step) instead of repeating the same solve up to the default 1 s.
+Scene to_scene(const json& document, const std::string& file, bool duration_given) {
   Scene scene;
   scene.file = file;
   // Top level; the name defaults to the file stem.
@@ -515,6 +525,7 @@ Scene to_scene(const json& document, const std::string& file) {
   scene.cutting.remove_fragments = cutting["remove_fragments"].get<std::string>();
   scene.cutting.fragment_volume = cutting["fragment_volume"].get<double>();
   scene.cutting.verify = cutting["verify"].get<bool>();
+  if (!duration_given && scene.solver.mode == "static" && time_independent(scene)) scene.duration = scene.solver.dt;
   scene.probes = to_probes(document["probes"], file);
   scene.render = to_render(document["render"], scene.tools, file);
   scene.output.frames = document["output"]["frames"].get<bool>();
@@ -541,8 +552,9 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
   json document = parse_document(text, path);
   if (!document.is_object()) fail(path, "", std::string("expected a JSON object, got ") + document.type_name());
   for (const std::string& override_text : overrides) apply_override(document, override_text);
+  const bool duration_given = document.contains("duration");
   schema::validate(document, schema::scene_schema(), "", path);
-  return to_scene(document, path);
+  return to_scene(document, path, duration_given);
 }
 
 }  // namespace octocut::engine

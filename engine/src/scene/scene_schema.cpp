@@ -144,6 +144,11 @@ constexpr double max_int = INT_MAX;
 Entry make_scene_schema() {
   Entry name = string("name", "Scene name, used in the report.");
   name.default_doc = "file stem";
+  Entry duration = number("duration", 1.0, greater_than(0),
+                          "Simulated time span, s. A static scene (`solver.mode` `static`) in which nothing moves "
+                          "with time (no tools, no handle with keyframes; render props do not count) solves once "
+                          "when `duration` is not given: its duration is then `solver.dt`, one step.");
+  duration.default_doc = "`1`; `solver.dt` for a static scene without tools or handle keyframes";
 
   Entry surface = required(box_or_path(
       "surface", {box("box", "Box-shaped object, m.")},
@@ -154,7 +159,7 @@ Entry make_scene_schema() {
       "solver",
       {
           choice("mode", {"dynamic", "static"}, "dynamic",
-                 "`dynamic` integrates the equations of motion in time; `static` solves for equilibrium at each step (load steps of `dt` up to `duration`)."),
+                 "`dynamic` integrates the equations of motion in time; `static` solves for equilibrium at each step (load steps of `dt` up to `duration`; once when nothing moves with time and `duration` is not given)."),
           number("dt", 1e-3, open_closed(0, 1), "Time step, s."),
           vec3("gravity", std::array{0.0, 0.0, -9.81}, "Gravitational acceleration, m/s^2."),
           choice("linear_solver", {"cholmod", "pcg"}, "pcg",
@@ -178,6 +183,10 @@ Entry make_scene_schema() {
                  number("density", 1000.0, greater_than(0), "Mass density rho, kg/m^3."),
                  number("rayleigh_mass", 0.0, at_least(0), "Mass-proportional Rayleigh damping alpha, 1/s."),
                  number("rayleigh_stiffness", 0.0, at_least(0), "Stiffness-proportional Rayleigh damping beta, s."),
+                 choice("element", {"trilinear", "bbar"}, "trilinear",
+                        "Hexahedron formulation: `trilinear` (fully integrated; stiff in bending as nu approaches "
+                        "0.5: volumetric locking) or `bbar` (B-bar, mean dilatation per element: does not lock "
+                        "volumetrically; use it for nearly incompressible tissue, nu >= 0.45)."),
              },
              "Elastic material of the object.");
 
@@ -338,7 +347,7 @@ Entry make_scene_schema() {
   return object("",
                 {
                     std::move(name),
-                    number("duration", 1.0, greater_than(0), "Simulated time span, s."),
+                    std::move(duration),
                     integer("seed", 0, at_least(0), "Seed for every random choice."),
                     std::move(solver),
                     std::move(object_entry),

@@ -127,10 +127,13 @@ Plan plan_accuracy(const Scene& scene, const std::map<std::string, ojson>& study
   const std::vector<int> levels = study_value(study, "levels", {o.base_level, o.base_level + 1, o.base_level + 2});
   if (levels.empty()) throw std::invalid_argument("--set /study/levels: at least one level");
   const std::vector<std::string> elements = study_value(study, "elements", known);
-  // The adaptive refinement shifted up by 0, 1, 2 levels, no finer than the finest uniform level.
+  // The adaptive refinement shifted up by 0, 1, 2 levels, its finest static region (or its base level, when it
+  // only refines where cuts go) no finer than the finest uniform level.
+  int finest_static = o.base_level;
+  for (const RefineRegion& r : o.refine) finest_static = std::max(finest_static, r.level);
   ojson default_shifts = ojson::array();
   for (int s = 0; s <= 2 && adaptive; ++s)
-    if (o.max_level + s <= *std::max_element(levels.begin(), levels.end())) default_shifts.push_back(s);
+    if (finest_static + s <= *std::max_element(levels.begin(), levels.end())) default_shifts.push_back(s);
   const std::vector<int> shifts = study_value(study, "adaptive_shifts", default_shifts);
   const std::vector<double> tolerances = study_value(study, "tolerances", {1e-2, 1e-4, 1e-6, 1e-8});
   const int solver_level = study_value(study, "solver_level", levels[levels.size() / 2]);

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <sstream>
 #include <string>
 
@@ -173,6 +174,31 @@ TEST_F(CliStudyTest, EmittedJobsAndCollectGiveTheSameStudyAsJobs) {
   }
 }
 
+TEST_F(CliStudyTest, DefaultSweepCoversLevelsAdaptivitySolversTimeStepsAndElements) {
+  // Planned only (--emit-jobs runs nothing): the static cantilever and the dynamic meniscus.
+  auto plan = [&](const std::string& scene, const std::string& name) {
+    const fs::path out = m_dir / name;
+    const auto r = run_octocut("study accuracy '" + scene + "' --out '" + out.string() + "' --emit-jobs '" +
+                               (m_dir / (name + ".txt")).string() + "' --quiet");
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    std::set<std::string> ids;
+    const json j = read_json(out / "study_plan.json");
+    for (const json& c : j["cases"]) ids.insert(c["id"].get<std::string>());
+    return ids;
+  };
+  const std::set<std::string> c = plan(kCantilever, "cantilever");
+  for (const std::string e : {"trilinear", "bbar"}) {
+    for (const std::string l : {"5", "6", "7"}) EXPECT_TRUE(c.count("uniform-L" + l + "-" + e + "-cholmod")) << l << e;
+    for (const std::string s : {"0", "1"}) EXPECT_TRUE(c.count("adaptive+" + s + "-" + e + "-cholmod")) << s << e;
+  }
+  for (const std::string t : {"0.01", "0.0001", "1e-06", "1e-08"})
+    EXPECT_TRUE(c.count("uniform-L6-trilinear-pcg-" + t)) << t;
+  EXPECT_EQ(c.size(), 14u);  // static: no time steps
+  const std::set<std::string> m = plan(std::string(OCTOCUT_SOURCE_DIR) + "/assets/scenes/meniscus_rest.json", "men");
+  for (const std::string dt : {"0.004", "0.002", "0.0005"})
+    EXPECT_TRUE(m.count("uniform-L6-trilinear-cholmod-dt" + dt)) << dt;
+}
+
 TEST_F(CliStudyTest, CalculixReferenceAgreesWithTheTrilinearHexOnTheSameMesh) {
   if (std::system("command -v ccx >/dev/null 2>&1") != 0) GTEST_SKIP() << "ccx (calculix-ccx) is not installed";
   const fs::path out = m_dir / "acc";
@@ -218,6 +244,15 @@ TEST_F(CliStudyTest, StabilityMatrixJudgesEveryCell) {
     EXPECT_NE(std::find(cols.begin(), cols.end(), c), cols.end()) << c;
   expect_png(out / "stability.png");
   EXPECT_NE(octocut::engine::read_file(out / "stability.md").find("press"), std::string::npos);
+  // Without a plotter the tables are still written, with a warning.
+  fs::remove(out / "stability.png");
+  fs::remove(out / "stability.csv");
+  const auto c = run_octocut("study collect '" + out.string() + "' --quiet", "PATH=/nonexistent");
+  EXPECT_EQ(c.exit_code, 0) << c.output;
+  EXPECT_NE(c.output.find("gnuplot is not installed"), std::string::npos) << c.output;
+  EXPECT_FALSE(fs::exists(out / "stability.png"));
+  EXPECT_TRUE(fs::exists(out / "stability.csv"));
+  EXPECT_NE(octocut::engine::read_file(out / "stability.md").find("gnuplot is not installed"), std::string::npos);
 }
 
 TEST_F(CliStudyTest, BadInputExits2) {

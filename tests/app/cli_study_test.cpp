@@ -215,6 +215,12 @@ TEST_F(CliStudyTest, CalculixReferenceAgreesWithTheTrilinearHexOnTheSameMesh) {
   ASSERT_EQ(row["case"]["id"], "uniform-L5-trilinear-cholmod");
   EXPECT_LT(row["error"]["probes"]["tip"].get<double>(), 0.01);
   EXPECT_LT(study["reference"]["probes"]["tip"][2].get<double>(), -1e-4);  // it bends down
+  // Without ccx the study says so and runs nothing.
+  const auto m = run_octocut("study accuracy '" + kCantilever + "' --out '" + (m_dir / "none").string() +
+                             "' --reference ccx --quiet", "PATH=/nonexistent");
+  EXPECT_EQ(m.exit_code, 1) << m.output;
+  EXPECT_NE(m.output.find("`ccx` is not installed (Debian package calculix-ccx)"), std::string::npos) << m.output;
+  EXPECT_FALSE(fs::exists(m_dir / "none" / "cases"));
 }
 
 TEST_F(CliStudyTest, StabilityMatrixJudgesEveryCell) {

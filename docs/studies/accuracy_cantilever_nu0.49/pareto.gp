@@ -1,5 +1,5 @@
 set xrange [39.499:9.46665e+06]
-set yrange [0.00283505:0.896766]
+set yrange [0.00242869:0.909754]
 set terminal pngcairo size 1280,860 font 'sans,10'
 set output out
 set title "Accuracy against cost: cantilever\nreference: Richardson extrapolation (bbar)" noenhanced

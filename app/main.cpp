@@ -1,6 +1,9 @@
 // octocut: command-line parsing and subcommands only (SPEC §7). Exit codes: 0 success, 1 the run failed (report
 // still written), 2 bad input or usage.
 #include <CLI/CLI.hpp>
+#include <unistd.h>
+
+#include <climits>
 #include <algorithm>
 #include <cstdio>
 #include <iostream>
@@ -15,6 +18,7 @@
 #include "octocut/engine/scene/expected.hpp"
 #include "octocut/engine/io/io.hpp"
 #include "octocut/engine/scene/scene_loader.hpp"
+#include "octocut/engine/study/study.hpp"
 #include "octocut/engine/run/tool.hpp"
 #include "octocut/engine/run/run.hpp"
 #include "octocut/engine/run/scene_object.hpp"
@@ -198,6 +202,27 @@ int cmd_bench(std::vector<std::string> names, const std::string& json_path, bool
   return code;
 }
 
+/// The absolute path of this executable (the cases of a study run it).
+std::string self_executable(const char* argv0) {
+  char buf[PATH_MAX];
+  const ssize_t n = readlink("/proc/self/exe", buf, sizeof(buf) - 1);
+  return n > 0 ? std::string(buf, std::size_t(n)) : std::string(argv0);
+}
+
+// `octocut study accuracy|stability SCENE ...` and `octocut study collect DIR...`.
+int cmd_study(engine::StudyOptions o, const std::vector<std::string>& args, bool out_given) {
+  if (o.kind == "collect") {
+    if (args.empty()) throw std::invalid_argument("study collect: give the directories to merge");
+    return engine::collect_study(args, o.quiet);
+  }
+  if (o.kind != "accuracy" && o.kind != "stability")
+    throw std::invalid_argument("unknown study '" + o.kind + "' (accuracy, stability, collect)");
+  if (args.size() != 1) throw std::invalid_argument("study " + o.kind + ": give exactly one scene file");
+  if (!out_given) throw std::invalid_argument("study " + o.kind + ": --out DIR is required");
+  o.scene = args.front();
+  return engine::run_study(o);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -279,6 +304,24 @@ int main(int argc, char** argv) {
   cut->add_flag("--no-verify", no_verify, "Skip the local check of the result");
   cut->add_flag("--ply-float", cut_opts.ply_float, "Write a .ply output in float32 (default float64, exact)");
 
+  auto* study = app.add_subcommand(
+      "study", "Studies: `study accuracy SCENE --out DIR` (error against run time), `study stability SCENE --out DIR` "
+               "(the stability matrix), `study collect DIR...` (merge cases that ran anywhere)");
+  engine::StudyOptions study_opts;
+  std::vector<std::string> study_args;
+  study->add_option("study", study_opts.kind, "accuracy | stability | collect")->required();
+  study->add_option("args", study_args, "The scene (accuracy, stability) or the directories (collect)");
+  auto* study_out = study->add_option("--out", study_opts.out_dir, "Where the plan, the cases and the results go");
+  study->add_option("--reference", study_opts.reference,
+                    "accuracy: a JSON file {\"probes\": {NAME: [ux, uy, uz]}}, or `ccx` (CalculiX on the same "
+                    "uniform mesh); default: Richardson extrapolation of the uniform sequence");
+  study->add_option("--jobs", study_opts.jobs, "Cases run at once, each its own process")->capture_default_str();
+  study->add_option("--emit-jobs", study_opts.emit_jobs,
+                    "Write one self-contained `octocut run` command per line to this file and run nothing");
+  study->add_option("--set", study_opts.sets,
+                    "Scene override for every case (/json/pointer=value), or /study/KEY=JSON to narrow the sweep");
+  study->add_flag("--quiet", study_opts.quiet, "No progress lines");
+
   auto* scene_doc = app.add_subcommand("scene-doc", "Print the scene-format documentation generated from the schema");
 
   auto* assets = app.add_subcommand("assets", "Regenerate the procedural meshes (binary PLY, millimetres)");
@@ -315,6 +358,10 @@ int main(int argc, char** argv) {
     }
     if (*bench) return cmd_bench(names, json_path, quiet, baseline_opts);
     if (*assets) return cmd_assets(assets_dir);
+    if (*study) {
+      study_opts.executable = self_executable(argv[0]);
+      return cmd_study(study_opts, study_args, study_out->count() > 0);
+    }
     if (*cut) {
       cut_opts.verify = !no_verify;
       const engine::CutCommandResult r = engine::run_cut_command(cut_opts);

@@ -592,6 +592,8 @@ std::vector<Entry> registry() {
           {"contact/meniscus_punch", [] { return bench_contact(); }}};
 }
 
+}  // namespace
+
 std::string cpu_name() {
   std::ifstream in("/proc/cpuinfo");
   std::string line;
@@ -603,6 +605,8 @@ std::string cpu_name() {
   }
   return "unknown";
 }
+
+namespace {
 
 }  // namespace
 

@@ -103,6 +103,16 @@ std::string report_json(const Report& r) {
                     {"newton_unconverged", r.newton_unconverged},
                     {"max_speed_m_s", num(r.max_speed_m_s)},
                     {"energy_j", {{"kinetic", num(r.kinetic_j)}, {"elastic", num(r.elastic_j)}}}};
+  if (r.track.enabled) {
+    const StabilityTrack& t = r.track;
+    j["stability"]["track"] = {{"energy_steps", t.energy_steps},
+                               {"energy_rise_j", num(t.energy_rise_j)},
+                               {"energy_scale_j", num(t.energy_scale_j)},
+                               {"max_displacement_m", num(t.max_displacement_m)},
+                               {"volume_change", num(t.volume_change)},
+                               {"min_volume_change", num(t.min_volume_change)},
+                               {"max_volume_change", num(t.max_volume_change)}};
+  }
   j["surface"] = {{"closed", r.surface_closed},
                   {"self_intersecting", r.surface_self_intersecting},
                   {"rest_volume_m3", num(r.rest_volume_m3)},

@@ -22,6 +22,7 @@
 #include "octocut/sim/surface_check.hpp"
 #include "octocut/sim/timing.hpp"
 #include "run/contact_world.hpp"
+#include "stability_track.hpp"
 
 namespace octocut::engine {
 
@@ -114,6 +115,7 @@ struct World::Impl {
 
   std::vector<CutSummary> cuts;
   std::vector<std::string> warnings;
+  std::optional<StabilityTracker> track;  // output.stability_track
 
   Impl(const Scene& s, const WorldOptions& o);
   void load_tools();
@@ -130,6 +132,7 @@ struct World::Impl {
   CutSummary cut(std::size_t tool, double t, bool scheduled);
   void run_due_cuts(std::vector<CutSummary>& out);
   [[nodiscard]] sim::Pose tool_pose(std::size_t tool, double t) const;
+  [[nodiscard]] bool handles_move_after(double t) const;
   void record_counts(Report& r) const;
   void record_state(Report& r) const;
   void record_contact(Report& r) const;
@@ -159,6 +162,10 @@ World::Impl::Impl(const Scene& s, const WorldOptions& o)
   check_start();
   bind_surface();
   if (scene_collides(scene)) build_contact();
+  if (scene.output.stability_track) {
+    track.emplace();
+    track->start(*sim, to_vec3(scene.solver.gravity));
+  }
 }
 
 void World::Impl::build_contact() {
@@ -430,6 +437,13 @@ void World::Impl::record_counts(Report& r) const {
   r.rest_volume_m3 = sim::signed_volume(surface);
 }
 
+// True when a handle has a keyframe later than t (s): it moves, or may move, after t and so puts work in.
+bool World::Impl::handles_move_after(double t) const {
+  for (const Handle& h : scene.object.handles)
+    if (!h.keyframes.empty() && h.keyframes.back().t > t) return true;
+  return false;
+}
+
 void World::Impl::record_state(Report& r) const {
   // Probes, energies and the stability counters of the current state.
   const sim::ObjectModel& m = sim->model();
@@ -454,6 +468,7 @@ void World::Impl::record_state(Report& r) const {
   r.kinetic_j = sim->kinetic_energy();
   r.elastic_j = sim->elastic_energy();
   r.sim_time_s = sim->state().t;
+  if (track) r.track = track->result();
   if (st.failed_steps > 0)
     r.warnings.push_back(std::to_string(st.failed_steps) +
                          " steps failed at the smallest dt and were reset (velocities zeroed)");
@@ -491,6 +506,7 @@ World& World::operator=(World&&) noexcept = default;
 StepResult World::step() {
   const auto t0 = sim::Clock::now();
   StepResult r;
+  const double t_start = m->sim->state().t;
   m->run_due_cuts(r.cuts);
   const auto sim0 = sim::Clock::now();
   m->contact_before_step();
@@ -502,6 +518,7 @@ StepResult World::step() {
   for (std::size_t c : m->awaiting_step) m->cuts[c].latency_ms += sim_ms;
   m->awaiting_step.clear();
   m->run_due_cuts(r.cuts);
+  if (m->track) m->track->after_step(*m->sim, r.cuts.empty() && !m->handles_move_after(t_start));
   ++m->steps;
   r.t = m->sim->state().t;
   r.ms = sim::ms_since(t0);

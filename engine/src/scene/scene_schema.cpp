@@ -456,7 +456,13 @@ Entry make_scene_schema() {
                                     "(6 digits, binary PLY, metres), and the rest surface once; 0: never."),
                             choice("ply_precision", {"double", "float"}, "double",
                                    "Coordinates of the PLY files written: `double` (a surface read back is the surface "
-                                   "written, bit for bit) or `float` (half the size, for renderers).")},
+                                   "written, bit for bit) or `float` (half the size, for renderers)."),
+                            boolean("stability_track", false,
+                                    "Track the run's stability every step (an energy evaluation per step) and report "
+                                    "`stability.track`: the largest rise of the total mechanical energy (kinetic + "
+                                    "elastic + gravitational) over a step in which no handle moved and no cut ran, J; "
+                                    "the largest DOF displacement seen, m; and the change of the deformed material "
+                                    "volume, final and extreme, relative to rest (`octocut study stability`).")},
                            "Files the run writes besides the report."),
                     std::move(expected),
                 },

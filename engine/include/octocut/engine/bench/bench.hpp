@@ -6,6 +6,9 @@
 
 namespace octocut::engine {
 
+/// The CPU's model name from /proc/cpuinfo ("unknown" when it has none).
+std::string cpu_name();
+
 /// Names of the benchmarks this build has, e.g. "step/cube10".
 std::vector<std::string> benchmark_names();
 

@@ -82,6 +82,18 @@ struct ContactSummary {
   std::vector<BodyContactSummary> bodies;
 };
 
+/// Stability tracked every step (scene `output.stability_track`; the report's `stability.track`, absent when off).
+struct StabilityTrack {
+  bool enabled = false;
+  long energy_steps = 0;            ///< steps with no handle motion and no cut, over which the energy was compared
+  double energy_rise_j = 0.0;       ///< largest rise of E = kinetic + elastic + gravitational over one such step, J
+  double energy_scale_j = 0.0;      ///< largest kinetic + elastic + |gravitational| seen, J (the scale of the rise)
+  double max_displacement_m = 0.0;  ///< largest |x - X| over the DOFs and the steps, m
+  double volume_change = 0.0;       ///< deformed material volume / rest volume - 1 after the last step
+  double min_volume_change = 0.0;   ///< smallest of it over the steps
+  double max_volume_change = 0.0;   ///< largest of it over the steps
+};
+
 struct Report {
   std::string status = "ok";  ///< "ok" | "failed"
   std::string error;
@@ -105,6 +117,7 @@ struct Report {
   long recoveries = 0, failed_steps = 0, solver_failures = 0, nonfinite = 0, speed_limit = 0, newton_unconverged = 0;
   double max_speed_m_s = 0.0;
   double kinetic_j = 0.0, elastic_j = 0.0;
+  StabilityTrack track;  ///< output.stability_track
   bool surface_closed = true, surface_self_intersecting = false;
   double rest_volume_m3 = 0.0;
   long surface_components = 0;

@@ -223,6 +223,28 @@ int cmd_study(engine::StudyOptions o, const std::vector<std::string>& args, bool
   return engine::run_study(o);
 }
 
+// `octocut study`: its options into `o`, its positional arguments into `args`; `out` is the --out option.
+CLI::App* add_study_command(CLI::App& app, engine::StudyOptions& study_opts, std::vector<std::string>& study_args,
+                            CLI::Option*& study_out) {
+  auto* study = app.add_subcommand(
+      "study", "Studies: `study accuracy SCENE --out DIR` (error against run time), `study stability SCENE --out DIR` "
+               "(the stability matrix), `study collect DIR...` (merge cases that ran anywhere)");
+  study->add_option("study", study_opts.kind, "accuracy | stability | collect")->required();
+  study->add_option("args", study_args, "The scene (accuracy, stability) or the directories (collect)");
+  study_out = study->add_option("--out", study_opts.out_dir, "Where the plan, the cases and the results go");
+  study->add_option("--reference", study_opts.reference,
+                    "accuracy: a JSON file {\"probes\": {NAME: [ux, uy, uz]}}, or `ccx` (CalculiX on the same "
+                    "uniform mesh); default: Richardson extrapolation of the uniform sequence");
+  study->add_option("--jobs", study_opts.jobs, "Cases run at once, each its own process")->capture_default_str();
+  study->add_option("--emit-jobs", study_opts.emit_jobs,
+                    "Write one self-contained `octocut run` command per line to this file and run nothing");
+  study->add_option("--set", study_opts.sets,
+                    "Scene override for every case (/json/pointer=value), or /study/KEY=JSON to narrow the sweep");
+  study->add_flag("--quiet", study_opts.quiet, "No progress lines");
+
+  return study;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -304,23 +326,10 @@ int main(int argc, char** argv) {
   cut->add_flag("--no-verify", no_verify, "Skip the local check of the result");
   cut->add_flag("--ply-float", cut_opts.ply_float, "Write a .ply output in float32 (default float64, exact)");
 
-  auto* study = app.add_subcommand(
-      "study", "Studies: `study accuracy SCENE --out DIR` (error against run time), `study stability SCENE --out DIR` "
-               "(the stability matrix), `study collect DIR...` (merge cases that ran anywhere)");
   engine::StudyOptions study_opts;
   std::vector<std::string> study_args;
-  study->add_option("study", study_opts.kind, "accuracy | stability | collect")->required();
-  study->add_option("args", study_args, "The scene (accuracy, stability) or the directories (collect)");
-  auto* study_out = study->add_option("--out", study_opts.out_dir, "Where the plan, the cases and the results go");
-  study->add_option("--reference", study_opts.reference,
-                    "accuracy: a JSON file {\"probes\": {NAME: [ux, uy, uz]}}, or `ccx` (CalculiX on the same "
-                    "uniform mesh); default: Richardson extrapolation of the uniform sequence");
-  study->add_option("--jobs", study_opts.jobs, "Cases run at once, each its own process")->capture_default_str();
-  study->add_option("--emit-jobs", study_opts.emit_jobs,
-                    "Write one self-contained `octocut run` command per line to this file and run nothing");
-  study->add_option("--set", study_opts.sets,
-                    "Scene override for every case (/json/pointer=value), or /study/KEY=JSON to narrow the sweep");
-  study->add_flag("--quiet", study_opts.quiet, "No progress lines");
+  CLI::Option* study_out = nullptr;
+  CLI::App* study = add_study_command(app, study_opts, study_args, study_out);
 
   auto* scene_doc = app.add_subcommand("scene-doc", "Print the scene-format documentation generated from the schema");
 

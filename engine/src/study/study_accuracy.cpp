@@ -264,7 +264,7 @@ std::string markdown(const Plan& plan, const std::vector<Row>& rows, const ojson
        "probes (the Pareto front's error). `field_l2` is the root-mean-square difference of the displacement over "
        "S's rest vertices against the finest run (`"
     << (ref["field_reference"].is_null() ? "none" : ref["field_reference"].get<std::string>())
-    << "`), divided by that run's RMS displacement (surfaces are float32 PLY: a floor near 1e-6 relative).\n\n"
+    << "`), divided by that run's RMS displacement (surfaces are float64 PLY, read back exactly).\n\n"
     << "**Machine:** " << machine["cpu"].get<std::string>() << ", " << machine["threads"].get<int>()
     << " hardware threads; calibration kernel " << f(machine["calibration_ms"], "%.3g") << " ms (`octocut bench`'s; "
     << "divide ms/step by it to compare machines).\n\n";

@@ -7,6 +7,8 @@
 
 #include "octocut/engine/bench/bench.hpp"
 #include "octocut/engine/io/io.hpp"
+#include "octocut/engine/io/mesh_io.hpp"
+#include "io/mesh_ply.hpp"
 #include "study_internal.hpp"
 
 namespace octocut::engine::study {
@@ -26,24 +28,17 @@ ojson find_report(const std::vector<fs::path>& dirs, const std::string& id, fs::
 }
 
 std::vector<Vec3d> read_ply_vertices(const fs::path& path) {
-  // The header of encode_ply_binary: "element vertex N", float x y z, then the binary body.
-  const std::string bytes = read_file(path);
-  const std::size_t end = bytes.find("end_header\n");
-  if (bytes.rfind("ply\n", 0) != 0 || end == std::string::npos)
-    throw std::invalid_argument(path.string() + ": not a binary PLY written by octocut");
-  const std::string header = bytes.substr(0, end);
-  const std::size_t at = header.find("element vertex ");
-  if (at == std::string::npos || header.find("property float x") == std::string::npos)
-    throw std::invalid_argument(path.string() + ": no float vertex element");
-  const std::size_t n = std::stoul(header.substr(at + 15));
-  const std::size_t body = end + 11;
-  if (bytes.size() < body + n * 12) throw std::invalid_argument(path.string() + ": truncated");
-  std::vector<Vec3d> v(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    float f[3];
-    std::memcpy(f, bytes.data() + body + 12 * i, 12);  // little-endian float32, as the machines that write them
-    v[i] = {double(f[0]), double(f[1]), double(f[2])};
+  // The vertices as written (octocut writes float64 PLY by default, so the field error has no float32 floor), in file
+  // order: a case's rest and final surfaces share their vertex numbering.
+  PlyContents ply;
+  try {
+    ply = decode_ply(read_file(path), path.string());
+  } catch (const MeshError& e) {
+    throw std::invalid_argument(e.what());
   }
+  std::vector<Vec3d> v;
+  v.reserve(ply.positions.size());
+  for (const sim::Vec3& p : ply.positions) v.push_back({p.x(), p.y(), p.z()});
   return v;
 }
 

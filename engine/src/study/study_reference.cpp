@@ -28,7 +28,9 @@ ojson read_reference_file(const std::string& path, const Scene& scene) {
     if (key != "probes") throw std::invalid_argument(path + ": /" + key + ": unknown key (only /probes)");
   if (j["probes"].empty()) throw std::invalid_argument(path + ": /probes: no probe given");
   ojson out = ojson::object();
-  for (const auto& [name, v] : j["probes"].items()) {
+  for (const auto& item : j["probes"].items()) {
+    const std::string name = item.key();  // a plain variable: lambdas cannot capture structured bindings in clang 14
+    const auto& v = item.value();
     const bool known = std::any_of(scene.probes.begin(), scene.probes.end(), [&](const Probe& p) { return p.name == name; });
     if (!known)
       throw std::invalid_argument(path + ": /probes/" + name + ": the scene " + scene.file + " has no probe '" + name +

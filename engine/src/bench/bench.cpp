@@ -99,6 +99,13 @@ StepRun run_cube(const std::string& solver, const std::string& preconditioner, d
 
 double median_of(std::vector<double> v) { return TimingSummary::of(std::move(v)).median; }
 
+// The median of one part of the step profile (ms) over the steps from `skip` on.
+double profile_median(const std::vector<sim::StepProfile>& profile, std::size_t skip, double sim::StepProfile::*part) {
+  std::vector<double> ms;
+  for (std::size_t i = skip; i < profile.size(); ++i) ms.push_back(profile[i].*part);
+  return median_of(std::move(ms));
+}
+
 // A file under assets/: $OCTOCUT_ASSET_DIR, else the source tree's assets/ folder.
 std::filesystem::path asset_path(const std::string& relative) {
   const char* dir = std::getenv("OCTOCUT_ASSET_DIR");
@@ -141,20 +148,13 @@ std::vector<BenchOutput> bench_step(const std::string& variant) {
               {"density_kg_m3", 1000.0}, {"dt_s", 1e-3}, {"steps", steps}, {"linear_solver", solver},
               {"preconditioner", pre}, {"threads", int(std::thread::hardware_concurrency())},
               {"element", element == sim::HexFormulation::bbar ? "bbar" : "trilinear"}};
-  std::vector<double> rot, frc, asmb, slv;
-  for (std::size_t i = 10; i < run.profile.size(); ++i) {
-    rot.push_back(run.profile[i].rotations);
-    frc.push_back(run.profile[i].forces);
-    asmb.push_back(run.profile[i].assembly);
-    slv.push_back(run.profile[i].solve);
-  }
   b.metrics = {{"elements", m.num_elements()},
                {"dofs", m.num_dofs()},
                {"rel_error_vs_exact", max_ref > 0 ? max_dev / max_ref : 0.0},
-               {"rotations_ms", median_of(rot)},
-               {"forces_ms", median_of(frc)},
-               {"assembly_ms", median_of(asmb)},
-               {"solve_ms", median_of(slv)},
+               {"rotations_ms", profile_median(run.profile, 10, &sim::StepProfile::rotations)},
+               {"forces_ms", profile_median(run.profile, 10, &sim::StepProfile::forces)},
+               {"assembly_ms", profile_median(run.profile, 10, &sim::StepProfile::assembly)},
+               {"solve_ms", profile_median(run.profile, 10, &sim::StepProfile::solve)},
                {"mean_pcg_iterations", double(run.iterations) / steps},
                {"refactorizations", run.refactorizations},
                {"recoveries", run.stats.recoveries}};
@@ -444,22 +444,15 @@ std::vector<BenchOutput> bench_scene_step(const std::string& name, const std::st
   b.params = {{"scene", "assets/scenes/" + scene_name + ".json"}, {"sets", sets}, {"dt_s", scene.solver.dt},
               {"linear_solver", scene.solver.linear_solver}, {"tolerance", scene.solver.tolerance},
               {"steps", run.step_ms.size()}, {"threads", int(std::thread::hardware_concurrency())}};
-  std::vector<double> rot, frc, asmb, slv;
-  for (std::size_t i = skip; i < run.profile.size(); ++i) {
-    rot.push_back(run.profile[i].rotations);
-    frc.push_back(run.profile[i].forces);
-    asmb.push_back(run.profile[i].assembly);
-    slv.push_back(run.profile[i].solve);
-  }
   const double steps = double(std::max<std::size_t>(1, run.step_ms.size()));
   b.metrics = {{"elements", run.elements},
                {"dofs", run.dofs},
                {"rel_error_vs_exact", rel_error(run, exact)},
                {"p95_over_median", b.ms.median > 0 ? b.ms.p95 / b.ms.median : 0.0},
-               {"rotations_ms", median_of(rot)},
-               {"forces_ms", median_of(frc)},
-               {"assembly_ms", median_of(asmb)},
-               {"solve_ms", median_of(slv)},
+               {"rotations_ms", profile_median(run.profile, skip, &sim::StepProfile::rotations)},
+               {"forces_ms", profile_median(run.profile, skip, &sim::StepProfile::forces)},
+               {"assembly_ms", profile_median(run.profile, skip, &sim::StepProfile::assembly)},
+               {"solve_ms", profile_median(run.profile, skip, &sim::StepProfile::solve)},
                {"mean_pcg_iterations", double(run.iterations) / steps},
                {"refactorizations", run.refactorizations},
                {"realtime_factor", run.wall_ms > 0 ? run.sim_time_s / (run.wall_ms / 1000.0) : 0.0}};

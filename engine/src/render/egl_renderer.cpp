@@ -22,13 +22,6 @@ namespace {
 
 // ---- EGL errors -----------------------------------------------------------------------------------------------------
 
-/// "NAME (0x1234)": an error name with its code.
-std::string named_code(const char* name, unsigned code) {
-  char code_text[16];
-  std::snprintf(code_text, sizeof code_text, "0x%04X", code);
-  return std::string(name) + " (" + code_text + ")";
-}
-
 /// "EGL_BAD_ACCESS (0x3002)" for an EGL error code.
 std::string egl_error_text(EGLint code) {
   const char* name = "unknown EGL error";

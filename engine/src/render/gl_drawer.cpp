@@ -19,16 +19,15 @@
 
 namespace octocut::engine {
 
-namespace {
-
-// ---- GL errors ------------------------------------------------------------------------------------------------------
-
-/// "NAME (0x1234)": an error name with its code.
 std::string named_code(const char* name, unsigned code) {
   char code_text[16];
   std::snprintf(code_text, sizeof code_text, "0x%04X", code);
   return std::string(name) + " (" + code_text + ")";
 }
+
+namespace {
+
+// ---- GL errors ------------------------------------------------------------------------------------------------------
 
 /// "GL_INVALID_OPERATION (0x0502)" for a GL error code.
 std::string gl_error_text(GLenum code) {

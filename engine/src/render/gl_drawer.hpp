@@ -10,6 +10,9 @@
 
 namespace octocut::engine {
 
+/// "NAME (0x1234)": a GL or EGL error name with its code, for messages.
+std::string named_code(const char* name, unsigned code);
+
 class GlDrawer {
  public:
   /// Compiles the programs and creates the buffers in the current context. Throws RenderError on GL failure.

@@ -256,12 +256,15 @@ void FemSystem::rotations(const std::vector<Vec3>& x, ElementFrame& frame) const
   std::vector<Vec3> slots;
   prolong(x, slots);
   frame.rotation.resize(std::size_t(m.num_elements()));
+  frame.volume_ratio.resize(std::size_t(m.num_elements()));
   m_impl->executor_ptr->parallel_for(m.num_elements(), kGrain, [&](int b, int en) {
     Vec24 xe;
     Eigen::Matrix<double, 3, 8> xm;
     for (int e = b; e < en; ++e) {
       element_slots(slots, e, xe, xm);
-      frame.rotation[std::size_t(e)] = polar_rotation(hex_center_gradient(xm, m.edge()[std::size_t(e)]));
+      const Mat3 F = hex_center_gradient(xm, m.edge()[std::size_t(e)]);
+      frame.rotation[std::size_t(e)] = polar_rotation(F);
+      frame.volume_ratio[std::size_t(e)] = F.determinant();
     }
   });
 }

@@ -106,6 +106,10 @@ class CholmodFactor {
   }
   /// Block size of the graph the last ordering was computed on: 3 (FEM system) or 1 (scalar pattern).
   [[nodiscard]] int block_size() const { return m_block; }
+  /// Floating-point operations of one numeric factorisation, sum over columns of count^2 (0 before analyze).
+  [[nodiscard]] double factor_flops() const { return m_factor_flops; }
+  /// Entries of L, sum over columns of count (0 before analyze).
+  [[nodiscard]] double factor_entries() const { return m_factor_entries; }
 
  private:
   void free_factor() {
@@ -188,6 +192,7 @@ class CholmodFactor {
       for (int c = 0; c < block; ++c) perm[block * q + c] = block * bperm[q] + c;
     std::vector<int> super_map(static_cast<std::size_t>(n));  // supernode of each scalar column
     int at = 0, xat = 0;
+    m_factor_entries = m_factor_flops = 0.0;
     for (int s = 0; s < nsuper; ++s) {
       super[s] = block * bsuper[s];
       pi[s] = at;
@@ -200,6 +205,8 @@ class CholmodFactor {
       for (int j = super[s]; j < super[s] + nscol; ++j) {
         super_map[std::size_t(j)] = s;
         count[j] = nsrow - (j - super[s]);
+        m_factor_entries += double(count[j]);
+        m_factor_flops += double(count[j]) * double(count[j]);
       }
     }
     super[nsuper] = n;
@@ -236,6 +243,8 @@ class CholmodFactor {
   cholmod_dense* m_y = nullptr;
   cholmod_dense* m_e = nullptr;
   int m_block = 1;
+  double m_factor_flops = 0.0;    ///< of one numeric factorisation
+  double m_factor_entries = 0.0;  ///< nnz(L)
 };
 
 // Direct solver: supernodal LL^T; the symbolic analysis is reused until the pattern changes.
@@ -273,8 +282,18 @@ class CholmodSolver final : public LinearSolver {
 };
 
 // Conjugate gradients, warm-started from x, with either a lagged Cholesky factor of an earlier system matrix or
-// the diagonal as preconditioner. The lagged factor is refreshed only when convergence slows down, so most steps
-// pay a few triangular solves instead of a factorisation.
+// the diagonal as preconditioner. The lagged factor is refreshed by a rent-or-buy rule. The solve right after a
+// factorisation converges in one iteration; the next one, a step later, takes the baseline: what one step's change
+// of the matrix (the rotations) costs even with a fresh factor. Every iteration a later solve needs beyond the
+// baseline (the fewest since the factorisation) is rent paid for the factor's age, priced in floating-point
+// operations: two triangular solves with L, a product with A, five vector updates. A factorisation is the purchase:
+// its operations divided by factor_flop_advantage, because its dense supernodal kernels do that many more operations
+// per second than the triangular solves. Once the rent paid since the last factorisation reaches the purchase price,
+// the next solve refactorises first. When the iteration count grows linearly with the factor's age (an object that
+// keeps rotating, contacts that keep changing) this period minimises the mean cost per step; an object whose
+// iterations stay at the baseline never pays for a factorisation it would not gain from. The rule counts iterations
+// and operations only, so it is deterministic. A solve that does not converge, or would pay more than a
+// factorisation in iterations beyond the baseline, refactorises at once and continues from x.
 class PcgSolver final : public LinearSolver {
  public:
   explicit PcgSolver(const LinearSolverOptions& o) : m_opt(o), m_use_cholesky(o.preconditioner != "jacobi") {
@@ -301,13 +320,24 @@ class PcgSolver final : public LinearSolver {
   SolveInfo solve(const VecX& b, VecX& x) override {
     SolveInfo info;
     if (x.size() != b.size() || !x.allFinite()) x = VecX::Zero(b.size());
-    run_pcg(b, x, info);
-    // Slow or failed convergence: refresh the lagged factor from the current matrix and continue from x.
-    if (m_use_cholesky && (!info.ok || info.iterations > m_opt.refactor_iterations)) {
+    if (m_use_cholesky && m_rent >= purchase_price()) {
+      if (!refactor()) return info;
+      info.refactorized = true;
+    }
+    // With a lagged factor, a solve that would pay more than a factorisation in iterations stops and buys one.
+    // (Once the baseline is known: from the second solve after a factorisation on.)
+    int cap = m_opt.max_iterations;
+    if (m_use_cholesky && !info.refactorized && m_solves_since_factor >= 2)
+      cap = int(std::min<double>(cap, m_baseline + 1.0 + std::floor(purchase_price() / iteration_flops())));
+    run_pcg(b, x, info, cap);
+    if (!m_use_cholesky) return info;
+    pay_rent(info.iterations);
+    // Failed or too slow convergence: refresh the lagged factor from the current matrix and continue from x.
+    if (!info.ok && !info.refactorized) {
       if (!refactor()) return info;
       info.refactorized = true;
       SolveInfo again;
-      run_pcg(b, x, again);
+      run_pcg(b, x, again, m_opt.max_iterations);
       info.ok = again.ok;
       info.iterations += again.iterations;
       info.residual = again.residual;
@@ -321,15 +351,30 @@ class PcgSolver final : public LinearSolver {
   bool refactor() {
     const BlasThreadsScope blas(m_opt.threads);
     m_have_factor = m_llt.factorize(*m_A);
+    m_rent = 0.0;
+    m_solves_since_factor = 0;
     return m_have_factor;
   }
+  // Counts the solve's iterations beyond the baseline as rent (see the class comment).
+  void pay_rent(int iterations) {
+    ++m_solves_since_factor;
+    if (m_solves_since_factor == 1) return;  // solved with the factor of its own matrix, or the first solve
+    if (m_solves_since_factor == 2 || iterations < m_baseline) m_baseline = iterations;
+    m_rent += double(std::max(0, iterations - m_baseline)) * iteration_flops();
+  }
+  // Operations of one PCG iteration with the factor: solves with L and L^T, a product with A, five vector updates.
+  [[nodiscard]] double iteration_flops() const {
+    return 4.0 * m_llt.factor_entries() + 2.0 * double(m_A->nonZeros()) + 10.0 * double(m_A->rows());
+  }
+  // A factorisation's price in iteration operations (see the class comment).
+  [[nodiscard]] double purchase_price() const { return m_llt.factor_flops() / m_opt.factor_flop_advantage; }
   void precondition(const VecX& r, VecX& z) {
     if (!m_use_cholesky)
       z = m_inv_diag.cwiseProduct(r);
     else if (!m_llt.solve(r, z))
       z = r;  // CHOLMOD failed (out of memory): an unpreconditioned step
   }
-  void run_pcg(const VecX& b, VecX& x, SolveInfo& info) {
+  void run_pcg(const VecX& b, VecX& x, SolveInfo& info, int max_iterations) {
     const SpMat& A = *m_A;
     const double bn = b.norm();
     if (!(bn > 0.0)) {
@@ -344,11 +389,11 @@ class PcgSolver final : public LinearSolver {
     p = z;
     double rz = r.dot(z);
     int it = 0;
-    while (rn / bn > m_opt.tolerance && it < m_opt.max_iterations) {
+    while (rn / bn > m_opt.tolerance && it < max_iterations) {
       Ap.noalias() = A * p;
       const double pAp = p.dot(Ap);
       // A non-positive curvature means A (or the preconditioner) is not SPD.
-      if (!(pAp > 0.0) || !std::isfinite(rz)) break;
+      if (!(pAp > 0.0) || !(rz > 0.0) || !std::isfinite(rz)) break;
       const double alpha = rz / pAp;
       x.noalias() += alpha * p;
       r.noalias() -= alpha * Ap;
@@ -369,6 +414,9 @@ class PcgSolver final : public LinearSolver {
   bool m_use_cholesky;
   CholmodFactor m_llt;
   bool m_have_factor = false;
+  double m_rent = 0.0;  ///< iteration operations paid since the last factorisation
+  int m_solves_since_factor = 0;
+  int m_baseline = 0;   ///< fewest iterations of a solve one step or more after the factorisation
   VecX m_inv_diag;
   const SpMat* m_A = nullptr;
 };

@@ -182,6 +182,7 @@ bool Simulator::solve_increment(double dt, const VecX& dv_c, VecX& dv) {
   auto t0 = Clock::now();
   ElementFrame frame;
   m_fem->rotations(m_state.x, frame);
+  for (const double r : frame.volume_ratio) m_stats.min_volume_ratio = std::min(m_stats.min_volume_ratio, r);
   m_profile.rotations = lap(t0);
   VecX f_el, kv;
   m_fem->force_and_product(m_state.x, frame, v, f_el, kv);
@@ -400,6 +401,8 @@ bool Simulator::solve_static(double t) {
   if (converged || std::isfinite(rn)) {
     m_state.x = x;
     for (auto& vv : m_state.v) vv.setZero();
+    // frame is at x (static_residual and line_search leave it at the accepted point).
+    for (const double ratio : frame.volume_ratio) m_stats.min_volume_ratio = std::min(m_stats.min_volume_ratio, ratio);
   }
   m_state.t = t;
   return converged;

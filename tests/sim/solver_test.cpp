@@ -116,6 +116,7 @@ TEST(LinearSolver, PcgWithLaggedFactorConvergesFastOnANearbyMatrix) {
   A1.diagonal().array() += 0.05;  // same pattern, slightly different values
   LinearSolverOptions o;
   o.tolerance = 1e-10;
+  o.factor_flop_advantage = 1e-6;  // a factorisation priced far above any solve: the lagged factor is kept
   auto s = make_linear_solver("pcg", o);
   s->analyze_pattern(A0);
   ASSERT_TRUE(s->factorize(A0));
@@ -130,6 +131,68 @@ TEST(LinearSolver, PcgWithLaggedFactorConvergesFastOnANearbyMatrix) {
   EXPECT_FALSE(info.refactorized);
   EXPECT_LE(info.iterations, 8);
   EXPECT_LT((A1 * x - b).norm(), 1e-9 * b.norm());
+}
+
+// The rent-or-buy rule: a matrix that stays where it is after one step of change (the baseline) never buys a new
+// factor, however many solves follow.
+TEST(LinearSolver, PcgKeepsTheLaggedFactorWhileIterationsStayAtTheBaseline) {
+  const SpMat A0 = laplacian(8, 0.1);
+  SpMat A1 = A0;
+  A1.diagonal().array() += 0.5;
+  LinearSolverOptions o;
+  o.tolerance = 1e-8;
+  auto s = make_linear_solver("pcg", o);
+  s->analyze_pattern(A0);
+  ASSERT_TRUE(s->factorize(A0));
+  VecX x = VecX::Zero(A0.rows());
+  ASSERT_TRUE(s->solve(VecX::Ones(A0.rows()), x).ok);
+  ASSERT_TRUE(s->factorize(A1));
+  int refactorizations = 0;
+  for (int k = 0; k < 40; ++k) {
+    const VecX b = VecX::LinSpaced(A1.rows(), -1.0, 1.0);
+    x.setZero();
+    const SolveInfo info = s->solve(b, x);
+    ASSERT_TRUE(info.ok);
+    EXPECT_LT((A1 * x - b).norm(), 1e-7 * b.norm());
+    refactorizations += info.refactorized ? 1 : 0;
+  }
+  EXPECT_EQ(refactorizations, 0);
+}
+
+// A matrix that drifts further every solve: the rule buys new factors, and the iterations plus factorisations cost
+// less than keeping the first factor for ever (a factorisation priced at infinity), with every solve accurate.
+TEST(LinearSolver, PcgRefreshesTheFactorOfADriftingMatrixAndSavesWork) {
+  const SpMat A0 = laplacian(10, 0.05);
+  auto run = [&](double advantage, int& refactorizations) {
+    LinearSolverOptions o;
+    o.tolerance = 1e-8;
+    o.factor_flop_advantage = advantage;
+    o.max_iterations = 1000;
+    auto s = make_linear_solver("pcg", o);
+    s->analyze_pattern(A0);
+    int iterations = 0;
+    refactorizations = 0;
+    for (int k = 0; k < 60; ++k) {
+      SpMat A = A0;
+      // A growing, non-uniform change: the diagonal of the first half of the unknowns rises.
+      for (int i = 0; i < A.rows() / 2; ++i) A.coeffRef(i, i) += 0.2 * k * (1.0 + (i % 7));
+      EXPECT_TRUE(s->factorize(A));
+      const VecX b = VecX::LinSpaced(A.rows(), -1.0, 2.0);
+      VecX x = VecX::Zero(A.rows());
+      const SolveInfo info = s->solve(b, x);
+      EXPECT_TRUE(info.ok);
+      EXPECT_LT((A * x - b).norm(), 1e-7 * b.norm());
+      iterations += info.iterations;
+      refactorizations += info.refactorized ? 1 : 0;
+    }
+    return iterations;
+  };
+  int with_rule = 0, never = 0;
+  const int it_rule = run(1.5, with_rule);
+  const int it_never = run(1e-12, never);
+  EXPECT_LE(never, 1);  // the first factorisation only (inside factorize)
+  EXPECT_GT(with_rule, 0);
+  EXPECT_LT(it_rule, it_never / 2);
 }
 
 TEST(LinearSolver, IndefiniteMatrixIsReportedNotCrashing) {

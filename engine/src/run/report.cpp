@@ -102,6 +102,7 @@ std::string report_json(const Report& r) {
                     {"speed_limit", r.speed_limit},
                     {"newton_unconverged", r.newton_unconverged},
                     {"max_speed_m_s", num(r.max_speed_m_s)},
+                    {"min_volume_ratio", num(r.min_volume_ratio)},
                     {"energy_j", {{"kinetic", num(r.kinetic_j)}, {"elastic", num(r.elastic_j)}}}};
   if (r.track.enabled) {
     const StabilityTrack& t = r.track;

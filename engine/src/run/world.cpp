@@ -465,6 +465,7 @@ void World::Impl::record_state(Report& r) const {
   r.speed_limit = st.speed_limit;
   r.newton_unconverged = st.newton_unconverged;
   r.max_speed_m_s = st.max_speed;
+  r.min_volume_ratio = st.min_volume_ratio;
   r.kinetic_j = sim->kinetic_energy();
   r.elastic_j = sim->elastic_energy();
   r.sim_time_s = sim->state().t;

@@ -43,6 +43,20 @@ const char* kStaticBeam = R"({
   "probes": [{"name": "tip", "point": [0.1, 0, 0]}]
 })";
 
+// A 1 cm cube at nu = 0 without gravity, its bottom face held and its top face pushed down by 4 mm in static load
+// steps. The exact solution is a uniaxial strain of -0.4 with no lateral motion, which trilinear corotated elements
+// reproduce exactly: every element's volume ratio is 0.6.
+const char* kCrushedCube = R"({
+  "name": "crushed cube", "duration": 0.004,
+  "solver": {"mode": "static", "dt": 0.001, "gravity": [0, 0, 0], "linear_solver": "cholmod", "tolerance": 1e-10},
+  "object": {"surface": {"box": {"min": [0, 0, 0], "max": [0.01, 0.01, 0.01]}},
+             "material": {"young_modulus": 1e4, "poisson_ratio": 0.0},
+             "octree": {"root": {"min": [0, 0, 0], "size": 0.01}, "base_level": 2, "max_level": 2},
+             "handles": [{"box": {"min": [-1, -1, -1], "max": [1, 1, 1e-6]}},
+                         {"box": {"min": [-1, -1, 0.009999], "max": [1, 1, 1]},
+                          "keyframes": [{"t": 0}, {"t": 0.004, "translation": [0, 0, -0.004]}]}]}
+})";
+
 class ElementSceneTest : public test::TempDirTest {
  protected:
   Scene scene(const std::string& text, const std::vector<std::string>& sets = {}) {
@@ -132,6 +146,14 @@ TEST_F(ElementSceneTest, ScenesThatMoveWithTimeKeepTheDefaultDuration) {
   EXPECT_EQ(steps({"/solver/mode=\"dynamic\""}), 1000);
   // A duration given in the file or by an override is kept.
   EXPECT_EQ(steps({"/duration=0.005"}), 5);
+}
+
+TEST_F(ElementSceneTest, MinVolumeRatioIsTheCrushsUniaxialStrain) {
+  World world(scene(kCrushedCube), WorldOptions{.render = false});
+  while (!world.done()) world.step();
+  const Report report = world.report();
+  ASSERT_EQ(report.status, "ok") << report.error;
+  EXPECT_NEAR(report.min_volume_ratio, 0.6, 1e-6);
 }
 
 }  // namespace

@@ -13,6 +13,9 @@ class Executor;
 /// Per-element corotational data at one configuration.
 struct ElementFrame {
   std::vector<Mat3> rotation;  ///< R of each element (num_elements)
+  /// det F at each element's centre: deformed over rest volume there, dimensionless (num_elements). Near 0: the
+  /// element is crushed flat; negative: inverted.
+  std::vector<double> volume_ratio;
 };
 
 /// The FEM assembly for one model revision: forces and the corotated stiffness gathered through P.

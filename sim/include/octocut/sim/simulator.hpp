@@ -37,6 +37,9 @@ struct StabilityStats {
   int solver_failures = 0;   ///< attempts rejected because the linear solve did not converge or A was not SPD
   int newton_unconverged = 0;  ///< static solves that stopped at max_iterations
   double max_speed = 0.0;    ///< largest DOF speed seen, m/s
+  /// Smallest element volume ratio (det F at an element's centre, deformed over rest) at the start of a dynamic
+  /// step or at the end of a static solve, dimensionless: near 0, an element crushed flat; negative, inverted.
+  double min_volume_ratio = 1.0;
 };
 
 /// Where the time of the last step went, ms (dynamic steps).

@@ -681,6 +681,12 @@ SurfaceCut surface_stage(SurfaceEditor& editor, const CutObject& object, const s
     const SurfaceEditResult r = cut_with_blade(editor, model, rest, k, sopt, cut, out);
     if (r.status == SurfaceCutStatus::no_op) continue;
     out.removed_volume += r.removed_volume;
+    if (r.new_triangles > 0) {
+      const bool first = out.new_triangles == 0;
+      out.min_angle_deg = first ? r.min_angle_deg : std::min(out.min_angle_deg, r.min_angle_deg);
+      out.min_edge = first ? r.min_edge : std::min(out.min_edge, r.min_edge);
+      out.new_triangles += r.new_triangles;
+    }
     std::vector<int32_t> merged;
     merged.reserve(cut.unused.size() + r.removed_vertices.size());
     std::merge(cut.unused.begin(), cut.unused.end(), r.removed_vertices.begin(), r.removed_vertices.end(),
@@ -758,6 +764,23 @@ double adopt_model(sim::Simulator& simulator, ModelStages& stages) {
   return ms_since(t0);
 }
 
+// Whether every rest-space blade would remove only material within options.min_feature of its surface (a sub-feature
+// shell, which the cut keeps whole: removes_only_subfeature). Indexes S when it has no grid yet (throws StageFailure
+// when S is invalid).
+bool only_subfeature(CutObject& object, const RestBlades& rest, const CutOptions& options) {
+  if (!(options.min_feature > 0.0)) return false;
+  if (!surface_indexed(object)) {
+    try {
+      index_surface(object);
+    } catch (const std::invalid_argument& e) {
+      throw StageFailure(std::string("surface: ") + e.what());
+    }
+  }
+  return std::all_of(rest.blades.begin(), rest.blades.end(), [&](const sim::TriMesh& b) {
+    return removes_only_subfeature(object.surface, *object.grid.grid, b, options.min_feature);
+  });
+}
+
 // How a cut ended when it did not throw.
 struct Verdict {
   std::string status;  ///< "ok" | "no-op"
@@ -773,6 +796,10 @@ Verdict run_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceEmbedd
   RestBlades rest = back_transform(model, simulator.state(), request, options, out);
   out.ms.back_transform = ms_since(t0);
   if (rest.blades.empty()) return {"no-op", "the blade meets no element"};
+  if (only_subfeature(object, rest, options)) {
+    out.ms.surface = ms_since(t0) - out.ms.back_transform;
+    return {"no-op", "the blade would remove only a shell of material thinner than cutting.min_feature (kept whole)"};
+  }
 
   ModelStages stages(simulator, options, request.inscribed_radius, rest);
   t0 = Clock::now();

@@ -14,6 +14,9 @@
 #include <cstdint>
 #include <exception>
 #include <iterator>
+#include <limits>
+#include <numbers>
+#include <cmath>
 #include <numeric>
 #include <stdexcept>
 #include <string>
@@ -63,6 +66,30 @@ ChangingFaces changing_faces(const sim::TriMesh& surface, Patch&& patch, std::ve
   return changing;
 }
 
+// The smallest angle and the shortest edge among the triangles the cut made (written.changed, not kept whole). Angles
+// by atan2(|u x v|, u . v), accurate for the tiniest angles of slivers.
+void new_triangle_quality(const sim::TriMesh& out, const WrittenPatch& written, SurfaceEditResult& result) {
+  double min_angle = std::numbers::pi;                        // rad
+  double min_edge2 = std::numeric_limits<double>::infinity();  // m^2
+  int n = 0;
+  for (std::size_t i = 0; i < written.changed.size(); ++i) {
+    if (written.changed_whole[i]) continue;
+    const Tri& t = out.triangles[static_cast<std::size_t>(written.changed[i])];
+    for (int k = 0; k < 3; ++k) {
+      const Vec3& a = out.vertices[static_cast<std::size_t>(t[k])];
+      const Vec3 u = out.vertices[static_cast<std::size_t>(t[(k + 1) % 3])] - a;
+      const Vec3 v = out.vertices[static_cast<std::size_t>(t[(k + 2) % 3])] - a;
+      min_edge2 = std::min(min_edge2, u.squaredNorm());
+      min_angle = std::min(min_angle, std::atan2(u.cross(v).norm(), u.dot(v)));
+    }
+    ++n;
+  }
+  result.new_triangles = n;
+  if (n == 0) return;
+  result.min_edge = std::sqrt(min_edge2);
+  result.min_angle_deg = min_angle * 180.0 / std::numbers::pi;
+}
+
 // The whole cut, phase after phase; throws CutFailure (or a CGAL exception). S is edited from write_back on.
 void cut(SurfaceEditor& editor, const sim::TriMesh& blade, const SurfaceCutOptions& options,
          SurfaceEditResult& result) {
@@ -89,6 +116,7 @@ void cut(SurfaceEditor& editor, const sim::TriMesh& blade, const SurfaceCutOptio
   const WrittenPatch written =
       write_back(editor, changing, core, blade.vertices.size(), g.centre, options.verify, result);
   if (options.verify) verify_result(editor.mesh(), grid, written, changing.arcs, nv);
+  new_triangle_quality(editor.mesh(), written, result);
   result.status = SurfaceCutStatus::ok;
 }
 
@@ -188,6 +216,9 @@ SurfaceCutResult cut_surface(const sim::TriMesh& surface, const sim::TriMesh& bl
   result.removed_volume = e.removed_volume;
   result.patch_triangles = e.patch_triangles;
   result.blade_triangles_kept = e.blade_triangles_kept;
+  result.new_triangles = e.new_triangles;
+  result.min_angle_deg = e.min_angle_deg;
+  result.min_edge = e.min_edge;
   if (e.status == SurfaceCutStatus::no_op) {
     result.mesh = surface;
     result.triangle_origin = std::move(origin);

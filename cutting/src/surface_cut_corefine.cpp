@@ -511,6 +511,11 @@ std::vector<int32_t> faces_inside_blade(const sim::TriMesh& surface, const Clear
   return gone;
 }
 
+int point_in_solid(const sim::TriMesh& surface, FaceGrid& grid, const sim::Vec3& q) {
+  const Side side = point_in_surface(surface, grid, to_point(q));
+  return side == Side::inside ? 1 : (side == Side::outside ? 0 : -1);
+}
+
 Corefinement corefine_and_classify(const sim::TriMesh& surface, FaceGrid& grid, const sim::TriMesh& blade,
                                    ExactBlade& exact, const Patch& patch, const BladeBox& g,
                                    const SurfaceCutOptions& options) {

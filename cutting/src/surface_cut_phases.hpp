@@ -147,6 +147,10 @@ Corefinement corefine_and_classify(const sim::TriMesh& surface, FaceGrid& grid, 
                                    ExactBlade& exact, const Patch& patch, const BladeBox& g,
                                    const SurfaceCutOptions& options);
 
+/// Where q (m) lies against the solid bounded by S: 1 inside, 0 outside, -1 on S or undecided (an exact ray-parity
+/// test along the axes, the faces from `grid`). Used by removes_only_subfeature (surface_cut_feature.cpp).
+int point_in_solid(const sim::TriMesh& surface, FaceGrid& grid, const sim::Vec3& q);
+
 // ---- Phase 3: writing back (surface_cut_write_back.cpp, no CGAL) ----
 
 /// The faces that change, as write_back takes them: P and the faces that go whole.

@@ -65,6 +65,7 @@ cutting::CutOptions cut_options(const CuttingSettings& s) {
                                                 : cutting::FragmentPolicy::all;
   o.fragment_volume = s.fragment_volume;
   o.verify = s.verify;
+  o.min_feature = s.min_feature;
   return o;
 }
 
@@ -377,6 +378,9 @@ CutSummary World::Impl::cut(std::size_t i, double t, bool scheduled) {
   c.leaves_refined = o.leaves_refined;
   c.fragments_removed = o.fragments_removed;
   c.fragment_volume_m3 = o.fragment_volume;
+  c.new_triangles = o.new_triangles;
+  c.min_angle_deg = o.min_angle_deg;
+  c.min_edge_m = o.min_edge;
   c.elements_after = sim->model().num_elements();
   c.dofs_after = sim->model().num_dofs();
   c.surface_vertices_after = long(object.surface.num_vertices());

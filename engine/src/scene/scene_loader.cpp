@@ -595,6 +595,7 @@ Scene to_scene(const json& document, const std::string& file, bool duration_give
   scene.cutting.remove_fragments = cutting["remove_fragments"].get<std::string>();
   scene.cutting.fragment_volume = cutting["fragment_volume"].get<double>();
   scene.cutting.verify = cutting["verify"].get<bool>();
+  scene.cutting.min_feature = cutting["min_feature"].get<double>();
   if (!duration_given && scene.solver.mode == "static" && time_independent(scene)) scene.duration = scene.solver.dt;
   scene.probes = to_probes(document["probes"], file);
   scene.render = to_render(document["render"], scene.tools, file);

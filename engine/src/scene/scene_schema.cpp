@@ -360,7 +360,13 @@ Entry make_scene_schema() {
               "Volume below which a loose piece counts as small (with `remove_fragments` = `small`), m^3."),
        boolean("verify", true,
                "After each cut, check that the surface S is closed and free of self-intersections; a cut that "
-               "breaks it is undone and reported as skipped.")},
+               "breaks it is undone and reported as skipped."),
+       number("min_feature", 3e-4, at_least(0),
+              "Minimum feature size of cuts, m: a cut whose blade would remove only material within this depth "
+              "below the blade's surface (a re-punch landing a few micrometres beside, or exactly on, the wall an "
+              "earlier cut left) keeps that shell whole and is a no-op, instead of shaving slivers off the surface. "
+              "The removed volume is then exact to within `min_feature` times the area of the blade's surface inside "
+              "the material. Only convex blades at least 2 `min_feature` thick are tested; 0: off.")},
       "How cuts are carried out.");
 
   Entry expected = make_entry(

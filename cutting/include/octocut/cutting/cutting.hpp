@@ -20,11 +20,20 @@ enum class FragmentPolicy {
   none,   ///< loose pieces stay (they fall freely)
 };
 
+/// The default minimum feature size of cuts, m (the scene key cutting.min_feature): 0.3 mm, half the finest
+/// material-graph cell of the shipped scenes (0.6 mm; M, which the simulation's material is, resolves nothing finer)
+/// and below the 0.5 mm advance of overlapping bites, but above the tens to hundreds of micrometres by which a
+/// re-punch at one spot of a sagging slab lands beside the wall the last one left (docs/RESULTS.md, issue 18).
+inline constexpr double kDefaultMinFeature = 3e-4;
+
 struct CutOptions {
   double max_condition = 10.0;                  ///< shape matching: blend towards the rotation above this cond(A)
   FragmentPolicy fragments = FragmentPolicy::all;
   double fragment_volume = 1e-9;                ///< m^3; the threshold of FragmentPolicy::small
   bool verify = true;                           ///< check S after the boolean (closed, manifold, no self-intersection)
+  double min_feature = kDefaultMinFeature;      ///< m; material that a blade would remove only within this depth
+                                                ///< below its surface is a sub-feature shell, kept whole: the cut
+                                                ///< is a no-op (removes_only_subfeature); 0: off
 };
 
 /// The FaceGrid of CutObject::surface and the sizes of S it matches. A copy starts empty: the copy's grid is built
@@ -94,6 +103,9 @@ struct CutOutcome {
   int perturbed = 0;                  ///< blades moved by 1e-9 (or 1e-7) of their size to leave a degenerate case
   int unrestricted = 0;               ///< of the restricted components, those whose restricted boolean could not be
                                       ///< closed up: their blade cut all the material under it
+  int new_triangles = 0;              ///< triangles the surface boolean made (pieces of cut faces and of the blades)
+  double min_angle_deg = 0.0;         ///< smallest interior angle among them, degrees (0 when none)
+  double min_edge = 0.0;              ///< shortest edge among them, m (0 when none)
   CutStageMs ms;
 };
 

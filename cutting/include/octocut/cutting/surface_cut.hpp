@@ -55,6 +55,9 @@ struct SurfaceCutResult {
                                              ///< theorem)
   int patch_triangles = 0;                   ///< triangles of S handed to CGAL
   int blade_triangles_kept = 0;              ///< triangles of the blade (after corefinement) that are in S'
+  int new_triangles = 0;                     ///< triangles of S' that are not faces of S
+  double min_angle_deg = 0.0;                ///< smallest interior angle among them, degrees (0 when none)
+  double min_edge = 0.0;                     ///< shortest edge among them, m (0 when none)
   double ms = 0.0;                           ///< wall time of the call, ms
 };
 
@@ -68,6 +71,9 @@ struct SurfaceEditResult {
   double removed_volume = 0.0;        ///< V(S) - V(S'), m^3, from the changed faces only
   int patch_triangles = 0;            ///< triangles of S handed to CGAL
   int blade_triangles_kept = 0;       ///< triangles of the blade (after corefinement) that are in S'
+  int new_triangles = 0;              ///< triangles of S' that are not faces of S (pieces of cut faces, the blade's)
+  double min_angle_deg = 0.0;         ///< smallest interior angle among the new triangles, degrees (0 when none)
+  double min_edge = 0.0;              ///< shortest edge among the new triangles, m (0 when none)
   double ms = 0.0;                    ///< wall time of the call, ms
 };
 
@@ -106,5 +112,15 @@ SurfaceCutResult cut_surface(const sim::TriMesh& surface, const sim::TriMesh& bl
 /// second member counts the moves (0: none; 1 or 2). When every attempt fails, the reason is the first attempt's.
 std::pair<SurfaceCutResult, int> cut_surface_perturbing(const sim::TriMesh& surface, sim::TriMesh& blade,
                                                         const SurfaceCutOptions& options = {});
+
+/// Whether `blade` (closed, outward oriented, m) can remove from the solid bounded by `surface` (S, with `grid` built
+/// over it) only material within `min_feature` (m) of the blade's surface: a sub-feature shell, which a cut keeps whole
+/// (cutting.min_feature). Conservative: true only when the blade is convex, its erosion by min_feature (its face planes
+/// moved inwards by min_feature, to within a millionth of it) holds the blade's vertex centroid, no triangle of S meets
+/// that erosion (triangles clipped against its half-spaces) and the centroid lies outside the solid (an exact ray
+/// parity test). A blade thinner than 2 min_feature, a non-convex blade and min_feature <= 0 give false. Costs a
+/// clipping of the faces of S in the blade's bounding box: no exact arithmetic but the one point query.
+bool removes_only_subfeature(const sim::TriMesh& surface, FaceGrid& grid, const sim::TriMesh& blade,
+                             double min_feature);
 
 }  // namespace octocut::cutting

@@ -34,6 +34,9 @@ struct CutSummary {
   int leaves_refined = 0;          ///< refine operations
   int fragments_removed = 0;       ///< loose pieces removed
   double fragment_volume_m3 = 0.0; ///< their material volume, m^3
+  int new_triangles = 0;           ///< triangles the surface boolean made
+  double min_angle_deg = 0.0;      ///< smallest angle among them, degrees (reported null when there are none)
+  double min_edge_m = 0.0;         ///< shortest edge among them, m (reported null when there are none)
   long elements_after = 0, dofs_after = 0, surface_vertices_after = 0;
   std::array<double, 8> ms{};      ///< per kCutStageKeys, ms
   /// What the user waits for: the cut's total plus the first simulation step after it, ms (the cut alone when the

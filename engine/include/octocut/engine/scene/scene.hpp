@@ -182,6 +182,7 @@ struct CuttingSettings {
   std::string remove_fragments = "all";  ///< "all" | "small" | "none": which pieces cut loose from every handle go
   double fragment_volume = 1e-9;         ///< with "small": pieces below this volume are removed, m^3
   bool verify = true;                    ///< check S after each cut: closed, free of self-intersections
+  double min_feature = 3e-4;             ///< minimum feature size of cuts, m (cutting::kDefaultMinFeature)
 };
 
 /// The shape of a rigid body (`rigid_bodies[]/shape`), in the body frame.

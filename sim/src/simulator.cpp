@@ -261,7 +261,15 @@ bool Simulator::try_dynamic_step(double dt) {
     // The forces of this (part of the) step, and where the next part starts from.
     const auto t0 = Clock::now();
     m_outcomes = sim::contact_outcomes(m_contacts, dt, v0, dv);
-    for (std::size_t i = 0; i < m_contacts.size(); ++i) m_contacts[i].penetration = m_outcomes[i].penetration;
+    for (std::size_t i = 0; i < m_contacts.size(); ++i) {
+      // The normal force is k (d_end - d_start + max(d_start, 0)) (contact.cpp): its potential is k d~^2 / 2 with
+      // d~ = d - d_start + max(d_start, 0).
+      const Contact& c = m_contacts[i];
+      const double d0 = std::max(c.penetration, 0.0), d1 = m_outcomes[i].penetration - c.penetration + d0;
+      m_contact_energy.work_j += dt * m_outcomes[i].force.dot(c.rigid_velocity);
+      m_contact_energy.penalty_change_j += 0.5 * c.stiffness * (d1 * d1 - d0 * d0);
+      m_contacts[i].penetration = m_outcomes[i].penetration;
+    }
     m_profile.contact += ms_since(t0);
   }
   return true;
@@ -281,6 +289,7 @@ void Simulator::reset_failed_step(const SimState& start) {
 void Simulator::step() {
   const double dt = m_options.dt;
   m_outcomes.clear();
+  m_contact_energy = {};
   if (empty()) {
     m_state.t += dt;  // nothing to simulate; time still runs
     m_contacts.clear();
@@ -295,8 +304,10 @@ void Simulator::step() {
   // down to dt / 2^max_halvings.
   std::function<bool(double, int)> advance = [&](double h, int depth) {
     const SimState before = m_state;
+    const ContactEnergy energy_before = m_contact_energy;
     if (try_dynamic_step(h)) return true;
     m_state = before;
+    m_contact_energy = energy_before;
     m_dv_prev.setZero();
     if (depth >= m_options.max_halvings) return false;
     return advance(0.5 * h, depth + 1) && advance(0.5 * h, depth + 1);
@@ -309,6 +320,7 @@ void Simulator::step() {
     return;
   }
   m_outcomes.clear();
+  m_contact_energy = {};
   reset_failed_step(start);
 }
 

@@ -160,9 +160,10 @@ class Simulator {
   double static_residual(const std::vector<Vec3>& x, const VecX& f_ext, ElementFrame& frame, VecX& r) const;
   // Newton direction dx from the corotated tangent at `frame`; false when the solve fails.
   bool newton_direction(const ElementFrame& frame, const VecX& r, VecX& dx);
-  // Backtracking from x along dx: on a finite residual x, r and frame move to the accepted point. Returns its norm.
-  double line_search(std::vector<Vec3>& x, const VecX& dx, const VecX& f_ext, double rn, int& allowance,
-                     ElementFrame& frame, VecX& r) const;
+  // Damped step from x along dx (the natural monotonicity test on the factorised tangent): on a finite residual x, r
+  // and frame move to the accepted point; a residual norm at most `done` (N) is accepted at once. Returns its norm.
+  double line_search(std::vector<Vec3>& x, const VecX& dx, const VecX& f_ext, double done, ElementFrame& frame,
+                     VecX& r);
   void rebuild();
   [[nodiscard]] std::unique_ptr<LinearSolver> make_solver() const;
 

@@ -227,12 +227,12 @@ TEST_F(CliStudyTest, StabilityMatrixJudgesEveryCell) {
   const fs::path out = m_dir / "stab";
   const auto r = run_octocut("study stability '" + kCube + "' --out '" + out.string() +
                              "' --jobs 2 --quiet --set '/study/young_modulus=[1e5]' --set '/study/poisson_ratio=[0.3]' "
-                             "--set '/study/dt=[1e-2]' --set '/study/scenarios=[\"sag\",\"crush\",\"twist\"]' "
+                             "--set '/study/dt=[1e-2]' --set '/study/scenarios=[\"sag\",\"crush\",\"twist\",\"press\"]' "
                              "--set /study/duration=0.1");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const json s = read_json(out / "stability.json");
   EXPECT_EQ(s["schema"], "octocut.stability/1");
-  ASSERT_EQ(s["rows"].size(), 3u);
+  ASSERT_EQ(s["rows"].size(), 4u);
   for (const json& row : s["rows"]) {
     const json rep = read_json(out / "cases" / row["case"]["id"].get<std::string>() / "report.json");
     const json& track = rep["stability"]["track"];
@@ -244,9 +244,18 @@ TEST_F(CliStudyTest, StabilityMatrixJudgesEveryCell) {
   }
   // The crush moves the top face down by 95% of the height: the largest displacement is at least that.
   EXPECT_GE(s["rows"][1]["max_displacement_m"].get<double>(), 0.95 * 0.01 - 1e-12);
+  // The press pushes through contact: the plate put work in, the top sank by most of the plate's travel (half the
+  // height, less the penalty's give), and the energy check counted that work.
+  const json& press = s["rows"][3];
+  EXPECT_EQ(press["case"]["scenario"], "press");
+  EXPECT_GT(press["energy"]["contact_work_j"].get<double>(), 0.0);
+  EXPECT_GT(press["max_displacement_m"].get<double>(), 0.4 * 0.01);
+  EXPECT_LT(press["max_displacement_m"].get<double>(), 0.6 * 0.01);
+  EXPECT_TRUE(press["energy"]["ok"].get<bool>());
+  EXPECT_EQ(press["energy"]["steps_checked"], 10);
   const std::vector<std::string> cols = csv_header(out / "stability.csv");
   for (const char* c : {"case", "scenario", "young_modulus", "poisson_ratio", "dt", "verdict", "finite", "bounded",
-                        "max_displacement_m", "energy_ok", "recoveries", "failed_steps", "volume_change", "cuts_skipped"})
+                        "max_displacement_m", "energy_ok", "contact_work_j", "recoveries", "failed_steps", "volume_change", "cuts_skipped"})
     EXPECT_NE(std::find(cols.begin(), cols.end(), c), cols.end()) << c;
   expect_png(out / "stability.png");
   EXPECT_NE(octocut::engine::read_file(out / "stability.md").find("press"), std::string::npos);

@@ -139,14 +139,22 @@ TEST(CantileverBbar, NearlyIncompressibleBeamComesWithinFivePercentAtLevel5) {
   EXPECT_LT(tri, 0.8 * kCcxTip049);
 }
 
-TEST(CantileverBbar, CompressibleBeamMovesByLessThanOnePercent) {
-  // At nu = 0.3 there is little to unlock: B-bar lies within 1% of the converged deflection at level 5, where the
-  // trilinear element is still a few percent stiff (cantilever_test.cpp).
+TEST(CantileverBbar, CompressibleBeamComesWithinOnePercentOfConverged) {
+  // At nu = 0.3 B-bar lies within 1% of the converged deflection at level 5, where the trilinear element is still
+  // 4% stiff (cantilever_test.cpp). Issue 17 asks that results "move by less than 1%" at nu = 0.3; against the
+  // trilinear element on the same mesh they move by 3.3% (0.87% at level 6), all of it towards the converged value:
+  // in the trilinear element's bending mode the divergence is not zero at the Gauss points, so its volumetric energy
+  // stiffens bending at any nu > 0, and removing it is the cure for locking. The variant that relaxes only the
+  // lambda term (mu part fully integrated, also free of locking and patch-test exact) was measured too: it moves by
+  // 2.2% and lands 2.0% short of converged (3.554e-4 m, -2.7%, at nu = 0.49). No such variant moves by under 1%.
   const double bbar = cantilever_tip(5, 0.3, HexFormulation::bbar);
   const double tri = cantilever_tip(5, 0.3, HexFormulation::trilinear);
   std::printf("nu 0.3 level 5 (20x4x4): bbar %.6e (%+.2f%%), trilinear %.6e (%+.2f%%), reference %.6e\n", bbar,
               100 * (bbar / kCcxTip03 - 1), tri, 100 * (tri / kCcxTip03 - 1), kCcxTip03);
   EXPECT_LT(std::abs(bbar / kCcxTip03 - 1.0), 0.01);
+  // It moves towards the converged value, never past it.
+  EXPECT_GT(bbar, tri);
+  EXPECT_LT(bbar, kCcxTip03);
   // The reference itself lies between the beam theories: Euler-Bernoulli q L^4 / (8 E I) and Timoshenko, which adds
   // q L^2 / (2 k G A) with k = 5/6 (both m).
   const double A = 0.02 * 0.02, I = std::pow(0.02, 4) / 12.0, q = 1000.0 * 9.81 * A, L = 0.1, E = 1e7;

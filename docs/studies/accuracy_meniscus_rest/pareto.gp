@@ -1,5 +1,5 @@
-set xrange [28.3681:415196]
-set yrange [0.00253787:0.574504]
+set xrange [3.67314:10463.4]
+set yrange [0.0347071:1.34483]
 set terminal pngcairo size 1280,860 font 'sans,10'
 set output out
 set title "Accuracy against cost: meniscus_rest\nreference: Richardson extrapolation (trilinear)" noenhanced

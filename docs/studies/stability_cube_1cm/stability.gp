@@ -1,6 +1,6 @@
-set terminal pngcairo size 1400,1190 font 'sans,10'
+set terminal pngcairo size 1400,1450 font 'sans,10'
 set output out
-set multiplot layout 4,1 title "Stability matrix: cube_1cm (level 2, 0.2 s per cell)" font 'sans,13' noenhanced
+set multiplot layout 5,1 title "Stability matrix: cube_1cm (level 2, 0.2 s per cell)" font 'sans,13' noenhanced
 set palette defined (0 '#228833', 1 '#99cc66', 2 '#ccbb44', 3 '#ee7733', 4 '#cc3311', 5 '#661100', 6 '#bbbbbb')
 set palette maxcolors 7
 set cbrange [-0.5:6.5]
@@ -18,6 +18,8 @@ set title 'scenario: crush'
 plot 'stability_crush.dat' using 1:2:3 with image title 'crush'
 set title 'scenario: twist'
 plot 'stability_twist.dat' using 1:2:3 with image title 'twist'
+set title 'scenario: press'
+plot 'stability_press.dat' using 1:2:3 with image title 'press'
 set title 'scenario: punch'
 plot 'stability_punch.dat' using 1:2:3 with image title 'punch'
 unset multiplot

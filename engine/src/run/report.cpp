@@ -112,6 +112,7 @@ std::string report_json(const Report& r) {
     j["stability"]["track"] = {{"energy_steps", t.energy_steps},
                                {"energy_rise_j", num(t.energy_rise_j)},
                                {"energy_scale_j", num(t.energy_scale_j)},
+                               {"contact_work_j", num(t.contact_work_j)},
                                {"max_displacement_m", num(t.max_displacement_m)},
                                {"volume_change", num(t.volume_change)},
                                {"min_volume_change", num(t.min_volume_change)},

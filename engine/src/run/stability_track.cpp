@@ -55,12 +55,16 @@ void StabilityTracker::start(const sim::Simulator& sim, const sim::Vec3& gravity
   measure(sim);
 }
 
-void StabilityTracker::after_step(const sim::Simulator& sim, bool work_free) {
+void StabilityTracker::after_step(const sim::Simulator& sim, bool checked) {
   const double before = m_energy;
   measure(sim);
-  if (!work_free) return;
+  // What rigid shapes put in through contact, and the energy their penalty springs took up (sim::ContactEnergy).
+  const sim::ContactEnergy& c = sim.contact_energy();
+  m_track.contact_work_j += c.work_j;
+  m_track.energy_scale_j = std::max(m_track.energy_scale_j, std::abs(m_track.contact_work_j));
+  if (!checked) return;
   ++m_track.energy_steps;
-  m_track.energy_rise_j = std::max(m_track.energy_rise_j, m_energy - before);
+  m_track.energy_rise_j = std::max(m_track.energy_rise_j, m_energy + c.penalty_change_j - before - c.work_j);
 }
 
 void StabilityTracker::measure(const sim::Simulator& sim) {

@@ -28,8 +28,10 @@ class StabilityTracker {
   StabilityTracker() = default;
   /// Starts tracking: the energy and rest volume of the current (rest) state.
   void start(const sim::Simulator& sim, const sim::Vec3& gravity);
-  /// After a step: `work_free` when no handle moved during it and no cut ran (the energy must not rise then).
-  void after_step(const sim::Simulator& sim, bool work_free);
+  /// After a step: `checked` when no handle moved during it and no cut ran. The energy of such a step must not rise
+  /// by more than the work that rigid shapes put in through contact (sim::Simulator::contact_energy: the energy
+  /// compared is the tissue's plus its contacts' penalty energy, the work is the sum of F . v_rigid dt).
+  void after_step(const sim::Simulator& sim, bool checked);
   /// The tracked values (enabled set).
   [[nodiscard]] StabilityTrack result() const { return m_track; }
 

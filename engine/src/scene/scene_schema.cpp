@@ -466,7 +466,10 @@ Entry make_scene_schema() {
                             boolean("stability_track", false,
                                     "Track the run's stability every step (an energy evaluation per step) and report "
                                     "`stability.track`: the largest rise of the total mechanical energy (kinetic + "
-                                    "elastic + gravitational) over a step in which no handle moved and no cut ran, J; "
+                                    "elastic + gravitational, plus the energy the contacts' penalty springs took up) "
+                                    "over a step in which no handle moved and no cut ran, less the work the rigid "
+                                    "shapes put in through contact in it (sum of F . v_rigid dt), J; that work over "
+                                    "the run (`contact_work_j`), J; "
                                     "the largest DOF displacement seen, m; and the change of the deformed material "
                                     "volume, final and extreme, relative to rest (`octocut study stability`).")},
                            "Files the run writes besides the report."),

@@ -200,6 +200,19 @@ std::vector<std::string> scenario_sets(const std::string& scenario, const Vec3d&
     for (int k = 1; k <= 4; ++k)  // quarter turns: slerp between keyframes takes the shorter arc
       top["keyframes"].push_back({{"t", T / 2 * k / 4}, {"rotation_deg", {0.0, 0.0, 90.0 * k}}});
     handles = {bottom, top};
+  } else if (scenario == "press") {
+    // A kinematic rigid plate, wider than the object, from touching the top face down by half the height over the
+    // first half of the run, then held; the bottom face fixed. It pushes through contact (penalty and friction).
+    handles = {bottom};
+    const Vec3d size{1.5 * (hi[0] - lo[0]) + 2 * pad, 1.5 * (hi[1] - lo[1]) + 2 * pad, 0.5 * H};
+    const Vec3d start{0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), hi[2] + 0.25 * H};
+    ojson plate = {{"name", "press"},
+                   {"shape", {{"box", {{"size", size}}}}},
+                   {"motion", "kinematic"},
+                   {"keyframes", ojson::array({{{"t", 0.0}, {"position", start}},
+                                               {{"t", T / 2}, {"position", {start[0], start[1], start[2] - 0.5 * H}}}})},
+                   {"render", "none"}};
+    return {set("/object/handles", handles), set("/tools", tools), set("/rigid_bodies", ojson::array({plate}))};
   } else {  // punch: 100 bites at one spot, each 0.5% of the height deeper than the last
     handles = {bottom};
     const double r = 0.15 * std::min(hi[0] - lo[0], hi[1] - lo[1]);
@@ -224,20 +237,20 @@ Plan plan_stability(const Scene& scene, const std::map<std::string, ojson>& stud
   const std::vector<double> E = study_value(study, "young_modulus", {1e2, 1e4, 1e6, 1e9});
   const std::vector<double> nu = study_value(study, "poisson_ratio", {0.0, 0.3, 0.45, 0.49, 0.499});
   const std::vector<double> dt = study_value(study, "dt", {1e-4, 1e-3, 1e-2, 5e-2});
-  const std::vector<std::string> scenarios = study_value(study, "scenarios", {"sag", "crush", "twist", "punch"});
+  const std::vector<std::string> scenarios =
+      study_value(study, "scenarios", {"sag", "crush", "twist", "punch", "press"});
   const int level = study_value(study, "level", scene.object.octree.base_level);
   const double T = study_value(study, "duration", 0.2);
   for (const std::string& s : scenarios)
-    if (s != "sag" && s != "crush" && s != "twist" && s != "punch")
-      throw std::invalid_argument("--set /study/scenarios: no scenario '" + s + "' (sag, crush, twist, punch)");
+    if (s != "sag" && s != "crush" && s != "twist" && s != "punch" && s != "press")
+      throw std::invalid_argument("--set /study/scenarios: no scenario '" + s + "' (sag, crush, twist, punch, press)");
   const auto [lo, hi] = object_bounds(scene);
   plan.object_size_m = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
   // Handles hold the nodes on a box's faces; a mesh's handles hold a slab of a tenth of its extent.
   const double slab = scene.object.surface_is_box ? 1e-6 * plan.object_size_m : 0.1 * plan.object_size_m;
   plan.settings = {{"young_modulus", E}, {"poisson_ratio", nu}, {"dt", dt},        {"scenarios", scenarios},
                    {"level", level},     {"duration", T},       {"bounds", {lo, hi}},
-                   {"skipped_scenarios",
-                    {{"press", "a rigid press needs rigid-body contact, which this build does not have yet"}}}};
+                   {"skipped_scenarios", ojson::object()}};
   for (const std::string& s : scenarios) {
     for (double e : E) {
       for (double n : nu) {

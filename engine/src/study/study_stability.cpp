@@ -25,7 +25,7 @@ struct Cell {
   std::string status = "missing";
   bool finite = false, bounded = false, energy_ok = true;
   double max_displacement_m = NAN, energy_rise_j = NAN, energy_scale_j = NAN, volume_change = NAN;
-  double min_volume_change = NAN, ms_per_step = NAN;
+  double min_volume_change = NAN, ms_per_step = NAN, contact_work_j = NAN;
   long energy_steps = 0, recoveries = 0, failed_steps = 0, cuts_ok = 0, cuts_skipped = 0, cuts_noop = 0;
   int verdict = 6;
 };
@@ -44,6 +44,7 @@ Cell judge(const Case& c, const ojson& rep, double size) {
   k.energy_rise_j = num_or_nan(tr.value("energy_rise_j", ojson(nullptr)));
   k.energy_scale_j = num_or_nan(tr.value("energy_scale_j", ojson(nullptr)));
   k.energy_steps = tr.value("energy_steps", 0L);
+  k.contact_work_j = num_or_nan(tr.value("contact_work_j", ojson(nullptr)));
   k.volume_change = num_or_nan(tr.value("volume_change", ojson(nullptr)));
   k.min_volume_change = num_or_nan(tr.value("min_volume_change", ojson(nullptr)));
   k.recoveries = st.at("recoveries");
@@ -76,7 +77,7 @@ ojson cell_json(const Cell& k) {
           {"bounded", k.bounded},
           {"max_displacement_m", nj(k.max_displacement_m)},
           {"energy", {{"ok", k.energy_ok}, {"rise_j", nj(k.energy_rise_j)}, {"scale_j", nj(k.energy_scale_j)},
-                      {"steps_checked", k.energy_steps}}},
+                      {"steps_checked", k.energy_steps}, {"contact_work_j", nj(k.contact_work_j)}}},
           {"recoveries", k.recoveries},
           {"failed_steps", k.failed_steps},
           {"volume_change", nj(k.volume_change)},
@@ -88,7 +89,7 @@ ojson cell_json(const Cell& k) {
 std::string csv_text(const std::vector<Cell>& cells) {
   std::ostringstream s;
   s << "case,scenario,young_modulus,poisson_ratio,dt,status,verdict,finite,bounded,max_displacement_m,energy_ok,"
-       "energy_rise_j,energy_scale_j,recoveries,failed_steps,volume_change,min_volume_change,cuts_ok,cuts_skipped,"
+       "energy_rise_j,energy_scale_j,contact_work_j,recoveries,failed_steps,volume_change,min_volume_change,cuts_ok,cuts_skipped,"
        "cuts_no_op,ms_per_step\n";
   for (const Cell& k : cells) {
     const ojson& p = k.c->params;
@@ -96,7 +97,7 @@ std::string csv_text(const std::vector<Cell>& cells) {
       << num_text(p["poisson_ratio"]) << ',' << num_text(p["dt"]) << ',' << k.status << ','
       << csv_field(kVerdicts[std::size_t(k.verdict)]) << ',' << k.finite << ',' << k.bounded << ','
       << num_text(k.max_displacement_m) << ',' << k.energy_ok << ',' << num_text(k.energy_rise_j) << ','
-      << num_text(k.energy_scale_j) << ',' << k.recoveries << ',' << k.failed_steps << ','
+      << num_text(k.energy_scale_j) << ',' << num_text(k.contact_work_j) << ',' << k.recoveries << ',' << k.failed_steps << ','
       << num_text(k.volume_change) << ',' << num_text(k.min_volume_change) << ',' << k.cuts_ok << ','
       << k.cuts_skipped << ',' << k.cuts_noop << ',' << num_text(k.ms_per_step) << '\n';
   }
@@ -163,12 +164,16 @@ std::string markdown(const Plan& plan, const std::vector<Cell>& cells, const std
     << num_text(plan.object_size_m) << " m.\n\n"
     << "Scenarios: **sag** (clamped at x min, gravity), **crush** (z max pushed down by 95% of the height, z min "
        "fixed), **twist** (z max turned 360° about z, z min fixed), **punch** (100 cylinder bites at one spot, each "
-       "0.5% of the height deeper). ";
+       "0.5% of the height deeper), **press** (a kinematic rigid plate wider than the object, from touching the top face "
+       "down by 50% of the height, z min fixed; penalty contact with the scene's friction; contact starts in the "
+       "first step in which the plate penetrates). ";
   for (const auto& [name, why] : s["skipped_scenarios"].items())
     m << "Not run: **" << name << "**: " << why.get<std::string>() << ". ";
   m << "\n\nPer cell: **finite** (state, probes, energy); **bounded** (largest DOF displacement over the run ≤ 2× the "
-       "object's size); **energy** (the total mechanical energy, kinetic + elastic + gravitational, never rises by "
-       "more than " << kEnergyRelTol << " of its scale over a step in which no handle moves and no cut runs); "
+       "object's size); **energy** (over a step in which no handle moves and no cut runs, the total mechanical "
+       "energy, kinetic + elastic + gravitational, plus the energy the contacts' penalty springs take up, never rises "
+       "by more than the work the rigid shapes put in through contact, the sum of F · v_rigid Δt over the contacts, "
+       "plus " << kEnergyRelTol << " of its scale); "
        "**recovered** (steps retried with a halved Δt), **failed steps** (reset after the smallest Δt failed); "
        "volume change of the deformed material (crush); cuts skipped. The verdict is the worst that applies, in the "
        "order ok < recovered < failed steps < energy rises < not bounded < not finite.\n\n"
@@ -237,7 +242,8 @@ int collect_stability(const Plan& plan, const std::vector<fs::path>& dirs, const
   j["settings"] = plan.settings;
   j["object_size_m"] = plan.object_size_m;
   j["criteria"] = {{"bounded", "max displacement <= 2 x object_size_m"},
-                   {"energy", "rise over a work-free step <= 1e-6 x energy scale + 1e-15 J"},
+                   {"energy", "over a step without handle motion or cut: rise of kinetic + elastic + gravitational + contact "
+                              "penalty energy - contact work of the rigid shapes <= 1e-6 x energy scale + 1e-15 J"},
                    {"verdicts", kVerdicts}};
   j["machine"] = machine;
   j["rows"] = ojson::array();

@@ -51,6 +51,16 @@ struct StepProfile {
   double contact = 0.0;    ///< contact terms added to the system and their forces afterwards (part of assembly)
 };
 
+/// The energy balance of the contacts over the last dynamic step (all its parts when it was split), for the check
+/// that the tissue's energy never rises by more than the work put in (output.stability_track). Implicit Euler with
+/// the contact force F at the end of a step obeys, per contact, F . (v_sample - v_rigid) dt <= -(V_end - V_start)
+/// (the penalty potential V = k d~^2 / 2, d~ the penetration the step's linearised force acts on; damping and
+/// friction only take energy out), so dE_tissue + penalty_change <= work: what moving rigid shapes put in.
+struct ContactEnergy {
+  double work_j = 0.0;            ///< sum over contacts and parts of F . v_rigid dt: work the rigid shapes did, J
+  double penalty_change_j = 0.0;  ///< sum of V_end - V_start of the penalty springs over the parts, J
+};
+
 /// A model revision made ready off to the side by Simulator::prepare_model: the state carried over, the FEM system,
 /// and optionally the system pattern with the linear solver's symbolic analysis. Move-only.
 class PreparedModel {
@@ -105,6 +115,9 @@ class Simulator {
   /// What each contact of the last step did (same order as set_contacts; empty after a step that failed at the
   /// smallest dt, or without contacts).
   [[nodiscard]] const std::vector<ContactOutcome>& contact_outcomes() const { return m_outcomes; }
+  /// The contacts' work and penalty energy change over the last step (zero without contacts, and after a step that
+  /// failed at the smallest dt).
+  [[nodiscard]] const ContactEnergy& contact_energy() const { return m_contact_energy; }
 
   /// Replaces the state (same revision).
   void set_state(SimState state);
@@ -150,9 +163,10 @@ class Simulator {
   double static_residual(const std::vector<Vec3>& x, const VecX& f_ext, ElementFrame& frame, VecX& r) const;
   // Newton direction dx from the corotated tangent at `frame`; false when the solve fails.
   bool newton_direction(const ElementFrame& frame, const VecX& r, VecX& dx);
-  // Backtracking from x along dx: on a finite residual x, r and frame move to the accepted point. Returns its norm.
-  double line_search(std::vector<Vec3>& x, const VecX& dx, const VecX& f_ext, double rn, int& allowance,
-                     ElementFrame& frame, VecX& r) const;
+  // Damped step from x along dx (the natural monotonicity test on the factorised tangent): on a finite residual x, r
+  // and frame move to the accepted point; a residual norm at most `done` (N) is accepted at once. Returns its norm.
+  double line_search(std::vector<Vec3>& x, const VecX& dx, const VecX& f_ext, double done, ElementFrame& frame,
+                     VecX& r);
   void rebuild();
   [[nodiscard]] std::unique_ptr<LinearSolver> make_solver() const;
 
@@ -171,6 +185,7 @@ class Simulator {
   VecX m_dv_prev;                    ///< last step's velocity increment, warm start (3 num_dofs)
   std::vector<Contact> m_contacts;   ///< contacts of the next (or current) step
   std::vector<ContactOutcome> m_outcomes;  ///< what they did in the last step
+  ContactEnergy m_contact_energy;          ///< their work and penalty energy change over the last step
 };
 
 }  // namespace octocut::sim

@@ -89,7 +89,10 @@ struct ContactSummary {
 struct StabilityTrack {
   bool enabled = false;
   long energy_steps = 0;            ///< steps with no handle motion and no cut, over which the energy was compared
-  double energy_rise_j = 0.0;       ///< largest rise of E = kinetic + elastic + gravitational over one such step, J
+  /// largest rise over one such step of E = kinetic + elastic + gravitational, plus the contacts' penalty energy
+  /// change, minus the work the rigid shapes did on the tissue through contact in it, J
+  double energy_rise_j = 0.0;
+  double contact_work_j = 0.0;      ///< work the rigid shapes did on the tissue through contact over the run, J
   double energy_scale_j = 0.0;      ///< largest kinetic + elastic + |gravitational| seen, J (the scale of the rise)
   double max_displacement_m = 0.0;  ///< largest |x - X| over the DOFs and the steps, m
   double volume_change = 0.0;       ///< deformed material volume / rest volume - 1 after the last step

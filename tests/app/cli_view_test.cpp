@@ -256,6 +256,84 @@ TEST_F(CliViewTest, MouseCutRecordReplayAndScreenshot) {
   EXPECT_LE(double(differing) / double(after.width * after.height), tol.at("max_fraction").get<double>());
 }
 
+// A 2 cm block of tissue (the octree's root cube, 5 mm leaves) with a fixed base and Poisson's ratio 0, and a platen (30 mm square, its face at the tool
+// origin) that collides and is held. Without gravity, heavily damped (rayleigh_mass 600 1/s against a first mode of
+// 350 rad/s), seen from straight above.
+constexpr const char* kPlatenScene = R"({
+  "name": "platen_push",
+  "duration": 1000,
+  "solver": {"mode": "dynamic", "dt": 0.002, "gravity": [0, 0, 0], "threads": 1},
+  "object": {"surface": {"box": {"min": [-0.01, -0.01, 0], "max": [0.01, 0.01, 0.02]}},
+             "material": {"young_modulus": 20000, "poisson_ratio": 0.0, "density": 1000, "rayleigh_mass": 600},
+             "octree": {"root": {"min": [-0.01, -0.01, 0], "size": 0.02}, "base_level": 2, "max_level": 2},
+             "handles": [{"box": {"min": [-1, -1, -1], "max": [1, 1, 0.0005]}}]},
+  "tools": [{"name": "platen", "mesh": "platen.obj", "blade": {"cylinder": {"radius": 0.001, "height": 0.001}},
+             "keyframes": [{"t": 0, "position": [0, 0, 0.05]}], "collide": true}],
+  "probes": [{"name": "top", "point": [0, 0, 0.0199]}],
+  "render": {"enabled": true, "width": 800, "height": 600, "msaa": 0,
+             "camera": {"position": [0, 0, 0.1], "target": [0, 0, 0.02], "up": [0, 1, 0], "fov_deg": 45}}
+})";
+
+// The platen: a closed box from (-15, -15, 0) to (15, 15, 10) mm, outward-facing triangles.
+constexpr const char* kPlatenObj =
+    "v -0.015 -0.015 0\nv 0.015 -0.015 0\nv 0.015 0.015 0\nv -0.015 0.015 0\n"
+    "v -0.015 -0.015 0.01\nv 0.015 -0.015 0.01\nv 0.015 0.015 0.01\nv -0.015 0.015 0.01\n"
+    "f 1 3 2\nf 1 4 3\nf 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\nf 2 3 7\nf 2 7 6\nf 3 4 8\nf 3 8 7\nf 4 1 5\nf 4 5 8\n";
+
+// The held tool pushes tissue. The mouse puts the platen on the block's top face (the view ray through the window's
+// centre is the block's axis), two W presses move it 2 × 0.8 mm deeper (1 % of the eye-target distance each), and
+// Esc ends the session once it has settled. With nu = 0 the block is in uniaxial compression whatever its base, so
+// the independent expectation is Hooke's law: the top moves down by u and the platen carries F = E A u / h (A the
+// top's area, h the height). The penalty lets the platen sink in by F / (k A), a few per cent of u here, so u is just
+// under the hand's indentation d; no sample is ever deeper than one key press.
+TEST_F(CliViewTest, HeldToolPushesTissue) {
+  write("platen.obj", kPlatenObj);
+  const fs::path scene = write("platen.json", kPlatenScene), record = m_dir / "s.json", out = m_dir / "o";
+  m_viewer = std::make_unique<Child>(
+      std::vector<std::string>{OCTOCUT_EXE, "view", scene.string(), "--record", record.string(), "--out", out.string()},
+      std::vector<std::string>{"DISPLAY=" + m_xvfb->display(), "LIBGL_ALWAYS_SOFTWARE=1"}, m_dir / "view.log");
+  const std::string window = xdotool("search --sync --onlyvisible --name 'octocut'");
+  ASSERT_FALSE(window.empty()) << log();
+  const std::string id = window.substr(0, window.find('\n'));
+  ASSERT_TRUE(wait_for([&] { return sim_time() >= 0.0; }, 40s)) << log();
+  xdotool("mousemove --sync --window " + id + " 400 300");  // the window's centre, right of the panel
+  std::this_thread::sleep_for(500ms);
+  xdotool("key w");
+  std::this_thread::sleep_for(300ms);
+  xdotool("key w");
+  // Simulated time follows the wall clock (the block's steps take well under its 2 ms): 3 s is 100 settling times.
+  const double pushed = sim_time();
+  ASSERT_TRUE(wait_for([&] { return sim_time() >= pushed + 3.0; }, 20s)) << log();
+  xdotool("key Escape");
+  ASSERT_EQ(m_viewer->wait_exit(20s), 0) << log();
+
+  // What the hand did, from the session: placed on the top face (z = 20 mm) above the axis, then d deeper.
+  const json session = read_json(record);
+  std::vector<json> poses;
+  for (const json& e : session["events"])
+    if (e["kind"] == "pose") poses.push_back(e["pose"]["position"]);
+  ASSERT_GE(poses.size(), 3u) << session.dump();
+  EXPECT_NEAR(poses.front()[2].get<double>(), 0.02, 1e-7);
+  EXPECT_LT(std::hypot(poses.back()[0].get<double>(), poses.back()[1].get<double>()), 1e-4);
+  const double d = 0.02 - poses.back()[2].get<double>();  // m
+  EXPECT_NEAR(d, 2 * 0.0008, 1e-6);
+
+  const json report = read_json(out / "report.json");
+  ASSERT_EQ(report["status"], "ok");
+  EXPECT_EQ(report["stability"]["failed_steps"], 0);
+  const double u = -report["probes"]["top"]["displacement"][2].get<double>();  // m, down
+  const json force = report["contact"]["tools"]["platen"]["force_n"]["final"];
+  const double E = 20000.0, A = 0.02 * 0.02, h = 0.02;
+  // Pushed down, by a little less than the hand went down.
+  EXPECT_GT(u, 0.9 * d);
+  EXPECT_LT(u, d);
+  // The tissue pushes the platen back up with Hooke's force for that displacement, and not sideways.
+  EXPECT_NEAR(force[2].get<double>(), E * A * u / h, 0.02 * E * A * u / h) << force.dump();
+  EXPECT_LT(std::hypot(force[0].get<double>(), force[1].get<double>()), 0.01 * force[2].get<double>());
+  // Penetration: never deeper than one key press (each moves the platen 0.8 mm at once).
+  EXPECT_LT(report["contact"]["max_penetration_m"].get<double>(), 0.0008 * 1.05);
+}
+
 TEST(CliViewNoDisplay, ExitsTwoWithAClearMessage) {
   const std::string scene = std::string(OCTOCUT_SOURCE_DIR) + "/assets/scenes/meniscus_punch.json";
   const CommandResult r = run_octocut("view '" + scene + "'", "env -u DISPLAY -u WAYLAND_DISPLAY");

@@ -290,7 +290,8 @@ TEST_F(CliViewTest, HeldToolPushesTissue) {
   write("platen.obj", kPlatenObj);
   const fs::path scene = write("platen.json", kPlatenScene), record = m_dir / "s.json", out = m_dir / "o";
   m_viewer = std::make_unique<Child>(
-      std::vector<std::string>{OCTOCUT_EXE, "view", scene.string(), "--record", record.string(), "--out", out.string()},
+      std::vector<std::string>{OCTOCUT_EXE, "view", scene.string(), "--set", "/render/overlays/contacts=true", "--record",
+                               record.string(), "--out", out.string()},
       std::vector<std::string>{"DISPLAY=" + m_xvfb->display(), "LIBGL_ALWAYS_SOFTWARE=1"}, m_dir / "view.log");
   const std::string window = xdotool("search --sync --onlyvisible --name 'octocut'");
   ASSERT_FALSE(window.empty()) << log();
@@ -304,6 +305,8 @@ TEST_F(CliViewTest, HeldToolPushesTissue) {
   // Simulated time follows the wall clock (the block's steps take well under its 2 ms): 3 s is 100 settling times.
   const double pushed = sim_time();
   ASSERT_TRUE(wait_for([&] { return sim_time() >= pushed + 3.0; }, 20s)) << log();
+  xdotool("key F12");
+  ASSERT_TRUE(wait_for([&] { return log().find("screenshot_000.png") != std::string::npos; }, 10s)) << log();
   xdotool("key Escape");
   ASSERT_EQ(m_viewer->wait_exit(20s), 0) << log();
 
@@ -332,6 +335,26 @@ TEST_F(CliViewTest, HeldToolPushesTissue) {
   EXPECT_LT(std::hypot(force[0].get<double>(), force[1].get<double>()), 0.01 * force[2].get<double>());
   // Penetration: never deeper than one key press (each moves the platen 0.8 mm at once).
   EXPECT_LT(report["contact"]["max_penetration_m"].get<double>(), 0.0008 * 1.05);
+
+  // The contact overlay, asked for with --set: the top face's corner samples, pressed down by u, are drawn over the
+  // platen as orange points (unlit 255, 140, 25), at the pixels the camera projects them to.
+  const auto shot = octocut::engine::decode_png(octocut::engine::read_file(out / "screenshot_000.png"), "shot");
+  octocut::engine::Camera camera;
+  camera.position = {0.0, 0.0, 0.1};
+  camera.target = {0.0, 0.0, 0.02};
+  camera.up = {0.0, 1.0, 0.0};
+  camera.fov_deg = 45.0;
+  for (const double x : {-0.01, 0.01})
+    for (const double y : {-0.01, 0.01}) {
+      const Eigen::Vector3d p = octocut::engine::project_to_pixel(camera, shot.width, shot.height, {x, y, 0.02 - u});
+      bool orange = false;
+      for (int dy = -2; dy <= 2; ++dy)
+        for (int dx = -2; dx <= 2; ++dx) {
+          const std::uint8_t* c = rgb(shot, int(p.x()) + dx, int(p.y()) + dy);
+          orange |= c[0] > 240 && c[1] > 120 && c[1] < 160 && c[2] < 50;
+        }
+      EXPECT_TRUE(orange) << "no contact point drawn at the corner (" << x << ", " << y << ")";
+    }
 }
 
 TEST(CliViewNoDisplay, ExitsTwoWithAClearMessage) {

@@ -285,7 +285,7 @@ constexpr const char* kPlatenObj =
 // Esc ends the session once it has settled. With nu = 0 the block is in uniaxial compression whatever its base, so
 // the independent expectation is Hooke's law: the top moves down by u and the platen carries F = E A u / h (A the
 // top's area, h the height). The penalty lets the platen sink in by F / (k A), a few per cent of u here, so u is just
-// under the hand's indentation d; no sample is ever deeper than one key press.
+// under the hand's indentation d; no sample is ever deeper than the largest move the hand made at once.
 TEST_F(CliViewTest, HeldToolPushesTissue) {
   write("platen.obj", kPlatenObj);
   const fs::path scene = write("platen.json", kPlatenScene), record = m_dir / "s.json", out = m_dir / "o";
@@ -300,7 +300,7 @@ TEST_F(CliViewTest, HeldToolPushesTissue) {
   xdotool("mousemove --sync --window " + id + " 400 300");  // the window's centre, right of the panel
   std::this_thread::sleep_for(500ms);
   xdotool("key w");
-  std::this_thread::sleep_for(300ms);
+  std::this_thread::sleep_for(600ms);
   xdotool("key w");
   // Simulated time follows the wall clock (the block's steps take well under its 2 ms): 3 s is 100 settling times.
   const double pushed = sim_time();
@@ -315,11 +315,14 @@ TEST_F(CliViewTest, HeldToolPushesTissue) {
   std::vector<json> poses;
   for (const json& e : session["events"])
     if (e["kind"] == "pose") poses.push_back(e["pose"]["position"]);
-  ASSERT_GE(poses.size(), 3u) << session.dump();
+  ASSERT_GE(poses.size(), 2u) << session.dump();  // two W presses in one frame (a slow window) make one move
   EXPECT_NEAR(poses.front()[2].get<double>(), 0.02, 1e-7);
   EXPECT_LT(std::hypot(poses.back()[0].get<double>(), poses.back()[1].get<double>()), 1e-4);
   const double d = 0.02 - poses.back()[2].get<double>();  // m
   EXPECT_NEAR(d, 2 * 0.0008, 1e-6);
+  double jump = 0.0;  // the largest move of the platen in one go, m
+  for (std::size_t i = 1; i < poses.size(); ++i)
+    jump = std::max(jump, poses[i - 1][2].get<double>() - poses[i][2].get<double>());
 
   const json report = read_json(out / "report.json");
   ASSERT_EQ(report["status"], "ok");
@@ -333,8 +336,8 @@ TEST_F(CliViewTest, HeldToolPushesTissue) {
   // The tissue pushes the platen back up with Hooke's force for that displacement, and not sideways.
   EXPECT_NEAR(force[2].get<double>(), E * A * u / h, 0.02 * E * A * u / h) << force.dump();
   EXPECT_LT(std::hypot(force[0].get<double>(), force[1].get<double>()), 0.01 * force[2].get<double>());
-  // Penetration: never deeper than one key press (each moves the platen 0.8 mm at once).
-  EXPECT_LT(report["contact"]["max_penetration_m"].get<double>(), 0.0008 * 1.05);
+  // Penetration: never deeper than the largest move the hand made at once (a press moves the platen 0.8 mm).
+  EXPECT_LT(report["contact"]["max_penetration_m"].get<double>(), 1.05 * jump);
 
   // The contact overlay, asked for with --set: the top face's corner samples, pressed down by u, are drawn over the
   // platen as orange points (unlit 255, 140, 25), at the pixels the camera projects them to.

@@ -256,6 +256,110 @@ TEST_F(CliViewTest, MouseCutRecordReplayAndScreenshot) {
   EXPECT_LE(double(differing) / double(after.width * after.height), tol.at("max_fraction").get<double>());
 }
 
+// A 2 cm block of tissue (the octree's root cube, 5 mm leaves) with a fixed base and Poisson's ratio 0, and a platen (30 mm square, its face at the tool
+// origin) that collides and is held. Without gravity, heavily damped (rayleigh_mass 600 1/s against a first mode of
+// 350 rad/s), seen from straight above.
+constexpr const char* kPlatenScene = R"({
+  "name": "platen_push",
+  "duration": 1000,
+  "solver": {"mode": "dynamic", "dt": 0.002, "gravity": [0, 0, 0], "threads": 1},
+  "object": {"surface": {"box": {"min": [-0.01, -0.01, 0], "max": [0.01, 0.01, 0.02]}},
+             "material": {"young_modulus": 20000, "poisson_ratio": 0.0, "density": 1000, "rayleigh_mass": 600},
+             "octree": {"root": {"min": [-0.01, -0.01, 0], "size": 0.02}, "base_level": 2, "max_level": 2},
+             "handles": [{"box": {"min": [-1, -1, -1], "max": [1, 1, 0.0005]}}]},
+  "tools": [{"name": "platen", "mesh": "platen.obj", "blade": {"cylinder": {"radius": 0.001, "height": 0.001}},
+             "keyframes": [{"t": 0, "position": [0, 0, 0.05]}], "collide": true}],
+  "probes": [{"name": "top", "point": [0, 0, 0.0199]}],
+  "render": {"enabled": true, "width": 800, "height": 600, "msaa": 0,
+             "camera": {"position": [0, 0, 0.1], "target": [0, 0, 0.02], "up": [0, 1, 0], "fov_deg": 45}}
+})";
+
+// The platen: a closed box from (-15, -15, 0) to (15, 15, 10) mm, outward-facing triangles.
+constexpr const char* kPlatenObj =
+    "v -0.015 -0.015 0\nv 0.015 -0.015 0\nv 0.015 0.015 0\nv -0.015 0.015 0\n"
+    "v -0.015 -0.015 0.01\nv 0.015 -0.015 0.01\nv 0.015 0.015 0.01\nv -0.015 0.015 0.01\n"
+    "f 1 3 2\nf 1 4 3\nf 5 6 7\nf 5 7 8\nf 1 2 6\nf 1 6 5\nf 2 3 7\nf 2 7 6\nf 3 4 8\nf 3 8 7\nf 4 1 5\nf 4 5 8\n";
+
+// The held tool pushes tissue. The mouse puts the platen on the block's top face (the view ray through the window's
+// centre is the block's axis), two W presses move it 2 × 0.8 mm deeper (1 % of the eye-target distance each), and
+// Esc ends the session once it has settled. With nu = 0 the block is in uniaxial compression whatever its base, so
+// the independent expectation is Hooke's law: the top moves down by u and the platen carries F = E A u / h (A the
+// top's area, h the height). The penalty lets the platen sink in by F / (k A), a few per cent of u here, so u is just
+// under the hand's indentation d; no sample is ever deeper than the largest move the hand made at once.
+TEST_F(CliViewTest, HeldToolPushesTissue) {
+  write("platen.obj", kPlatenObj);
+  const fs::path scene = write("platen.json", kPlatenScene), record = m_dir / "s.json", out = m_dir / "o";
+  m_viewer = std::make_unique<Child>(
+      std::vector<std::string>{OCTOCUT_EXE, "view", scene.string(), "--set", "/render/overlays/contacts=true", "--record",
+                               record.string(), "--out", out.string()},
+      std::vector<std::string>{"DISPLAY=" + m_xvfb->display(), "LIBGL_ALWAYS_SOFTWARE=1"}, m_dir / "view.log");
+  const std::string window = xdotool("search --sync --onlyvisible --name 'octocut'");
+  ASSERT_FALSE(window.empty()) << log();
+  const std::string id = window.substr(0, window.find('\n'));
+  ASSERT_TRUE(wait_for([&] { return sim_time() >= 0.0; }, 40s)) << log();
+  xdotool("mousemove --sync --window " + id + " 400 300");  // the window's centre, right of the panel
+  std::this_thread::sleep_for(500ms);
+  xdotool("key w");
+  std::this_thread::sleep_for(600ms);
+  xdotool("key w");
+  // Simulated time follows the wall clock (the block's steps take well under its 2 ms): 3 s is 100 settling times.
+  const double pushed = sim_time();
+  ASSERT_TRUE(wait_for([&] { return sim_time() >= pushed + 3.0; }, 20s)) << log();
+  xdotool("key F12");
+  ASSERT_TRUE(wait_for([&] { return log().find("screenshot_000.png") != std::string::npos; }, 10s)) << log();
+  xdotool("key Escape");
+  ASSERT_EQ(m_viewer->wait_exit(20s), 0) << log();
+
+  // What the hand did, from the session: placed on the top face (z = 20 mm) above the axis, then d deeper.
+  const json session = read_json(record);
+  std::vector<json> poses;
+  for (const json& e : session["events"])
+    if (e["kind"] == "pose") poses.push_back(e["pose"]["position"]);
+  ASSERT_GE(poses.size(), 2u) << session.dump();  // two W presses in one frame (a slow window) make one move
+  EXPECT_NEAR(poses.front()[2].get<double>(), 0.02, 1e-7);
+  EXPECT_LT(std::hypot(poses.back()[0].get<double>(), poses.back()[1].get<double>()), 1e-4);
+  const double d = 0.02 - poses.back()[2].get<double>();  // m
+  EXPECT_NEAR(d, 2 * 0.0008, 1e-6);
+  double jump = 0.0;  // the largest move of the platen in one go, m
+  for (std::size_t i = 1; i < poses.size(); ++i)
+    jump = std::max(jump, poses[i - 1][2].get<double>() - poses[i][2].get<double>());
+
+  const json report = read_json(out / "report.json");
+  ASSERT_EQ(report["status"], "ok");
+  EXPECT_EQ(report["stability"]["failed_steps"], 0);
+  const double u = -report["probes"]["top"]["displacement"][2].get<double>();  // m, down
+  const json force = report["contact"]["tools"]["platen"]["force_n"]["final"];
+  const double E = 20000.0, A = 0.02 * 0.02, h = 0.02;
+  // Pushed down, by a little less than the hand went down.
+  EXPECT_GT(u, 0.9 * d);
+  EXPECT_LT(u, d);
+  // The tissue pushes the platen back up with Hooke's force for that displacement, and not sideways.
+  EXPECT_NEAR(force[2].get<double>(), E * A * u / h, 0.02 * E * A * u / h) << force.dump();
+  EXPECT_LT(std::hypot(force[0].get<double>(), force[1].get<double>()), 0.01 * force[2].get<double>());
+  // Penetration: never deeper than the largest move the hand made at once (a press moves the platen 0.8 mm).
+  EXPECT_LT(report["contact"]["max_penetration_m"].get<double>(), 1.05 * jump);
+
+  // The contact overlay, asked for with --set: the top face's corner samples, pressed down by u, are drawn over the
+  // platen as orange points (unlit 255, 140, 25), at the pixels the camera projects them to.
+  const auto shot = octocut::engine::decode_png(octocut::engine::read_file(out / "screenshot_000.png"), "shot");
+  octocut::engine::Camera camera;
+  camera.position = {0.0, 0.0, 0.1};
+  camera.target = {0.0, 0.0, 0.02};
+  camera.up = {0.0, 1.0, 0.0};
+  camera.fov_deg = 45.0;
+  for (const double x : {-0.01, 0.01})
+    for (const double y : {-0.01, 0.01}) {
+      const Eigen::Vector3d p = octocut::engine::project_to_pixel(camera, shot.width, shot.height, {x, y, 0.02 - u});
+      bool orange = false;
+      for (int dy = -2; dy <= 2; ++dy)
+        for (int dx = -2; dx <= 2; ++dx) {
+          const std::uint8_t* c = rgb(shot, int(p.x()) + dx, int(p.y()) + dy);
+          orange |= c[0] > 240 && c[1] > 120 && c[1] < 160 && c[2] < 50;
+        }
+      EXPECT_TRUE(orange) << "no contact point drawn at the corner (" << x << ", " << y << ")";
+    }
+}
+
 TEST(CliViewNoDisplay, ExitsTwoWithAClearMessage) {
   const std::string scene = std::string(OCTOCUT_SOURCE_DIR) + "/assets/scenes/meniscus_punch.json";
   const CommandResult r = run_octocut("view '" + scene + "'", "env -u DISPLAY -u WAYLAND_DISPLAY");

@@ -79,11 +79,12 @@ class Child {
 // An X server of its own: Xvfb on the first free display (-displayfd), killed with the test.
 class Xvfb {
  public:
-  explicit Xvfb(const std::filesystem::path& log) {
+  // `screen`: WIDTHxHEIGHTxDEPTH of screen 0.
+  explicit Xvfb(const std::filesystem::path& log, const std::string& screen = "1024x768x24") {
     int fds[2];
     if (pipe(fds) != 0) return;
     m_server = std::make_unique<Child>(
-        std::vector<std::string>{"Xvfb", "-displayfd", std::to_string(fds[1]), "-screen", "0", "1024x768x24",
+        std::vector<std::string>{"Xvfb", "-displayfd", std::to_string(fds[1]), "-screen", "0", screen,
                                  "-nolisten", "tcp"},
         std::vector<std::string>{}, log, fds[1]);
     close(fds[1]);

@@ -347,11 +347,14 @@ struct GlDrawer::Impl {
     glUniform1i(uniform(m_overlay_program, "u_round"), 0);
     glDisableVertexAttribArray(1);
     glDepthFunc(GL_LEQUAL);
-    for (const OverlayLines& lines : scene.lines) {
-      if (lines.endpoints.size() < 2) continue;
-      upload_positions(lines.endpoints);
-      glUniform3fv(uniform(m_overlay_program, "u_color"), 1, lines.color.data());
-      glDrawArrays(GL_LINES, 0, GLsizei(lines.endpoints.size() / 2 * 2));
+    for (const bool on_top : {false, true}) {
+      if (on_top) glDisable(GL_DEPTH_TEST);
+      for (const OverlayLines& lines : scene.lines) {
+        if (lines.endpoints.size() < 2 || lines.on_top != on_top) continue;
+        upload_positions(lines.endpoints);
+        glUniform3fv(uniform(m_overlay_program, "u_color"), 1, lines.color.data());
+        glDrawArrays(GL_LINES, 0, GLsizei(lines.endpoints.size() / 2 * 2));
+      }
     }
     glDisable(GL_DEPTH_TEST);
     glEnable(GL_PROGRAM_POINT_SIZE);

@@ -124,4 +124,27 @@ void add_overlays(RenderScene& scene, const OverlaySettings& settings, const sim
   }
 }
 
+void add_contact_overlay(RenderScene& scene, const OverlaySettings& settings, const std::vector<sim::Contact>& contacts,
+                         const std::vector<sim::ContactOutcome>& outcomes, const std::vector<sim::Vec3>& dofs) {
+  if (!settings.contacts || contacts.empty()) return;
+  OverlayPoints points;
+  points.color = Eigen::Vector3f(1.0f, 0.55f, 0.1f);
+  points.size_px = 6.0f;
+  OverlayLines lines;
+  lines.color = Eigen::Vector3f(1.0f, 0.15f, 0.15f);
+  lines.on_top = true;
+  const bool forces = outcomes.size() == contacts.size();
+  for (std::size_t i = 0; i < contacts.size(); ++i) {
+    sim::Vec3 p = sim::Vec3::Zero();
+    for (const sim::ContactDof& d : contacts[i].dofs)
+      if (d.dof >= 0 && std::size_t(d.dof) < dofs.size()) p += d.weight * dofs[std::size_t(d.dof)];
+    points.points.push_back(to_float(p));
+    if (!forces) continue;
+    lines.endpoints.push_back(to_float(p));
+    lines.endpoints.push_back(to_float(p + settings.contact_force_scale * outcomes[i].force));
+  }
+  scene.points.push_back(std::move(points));
+  if (!lines.endpoints.empty()) scene.lines.push_back(std::move(lines));
+}
+
 }  // namespace octocut::engine

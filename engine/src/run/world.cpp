@@ -106,6 +106,7 @@ struct World::Impl {
   // Contact (only when the scene collides): the Bullet world and S's collision samples.
   std::unique_ptr<ContactWorld> contact;
   sim::ContactSamples samples;
+  std::vector<sim::Contact> drawn_contacts;  // the last step's contacts, kept only for the contact overlay
   double contact_stiffness = 0.0;   // Pa/m
   double contact_resolution = 0.0;  // m, the finest leaf at the start
 
@@ -250,6 +251,7 @@ void World::Impl::load_body_meshes() {
 
 void World::Impl::refresh_samples() {
   if (!contact) return;
+  drawn_contacts.clear();  // their DOF rows belong to the model before the cut
   if (sim->empty()) samples = sim::ContactSamples{};
   else samples = sim::build_contact_samples(sim->model(), object.surface, *embedding, contact_resolution);
   if (samples.begin.empty()) samples.begin.push_back(0);
@@ -264,7 +266,10 @@ void World::Impl::contact_before_step() {
     now.push_back(tool_pose(i, t));
     next.push_back(tool_pose(i, t + dt));
   }
-  sim->set_contacts(contact->find(samples, sim->state().x, sim->state().v, t, dt, now, next));
+  std::vector<sim::Contact> found = contact->find(samples, sim->state().x, sim->state().v, t, dt, now, next);
+  if (rendering && scene.render.overlays.contacts) drawn_contacts = found;
+  else drawn_contacts.clear();
+  sim->set_contacts(std::move(found));
 }
 
 void World::Impl::contact_after_step() {
@@ -655,7 +660,10 @@ RenderScene World::render_scene() const {
     }
     if (scene.tools[i].name == scene.render.camera.follow_tool) follow_tool(rs.camera, pose.position);
   }
-  if (!m->sim->empty()) add_overlays(rs, scene.render.overlays, model, slots, m->sim->state().x);
+  if (!m->sim->empty()) {
+    add_overlays(rs, scene.render.overlays, model, slots, m->sim->state().x);
+    add_contact_overlay(rs, scene.render.overlays, m->drawn_contacts, m->sim->contact_outcomes(), m->sim->state().x);
+  }
   return rs;
 }
 

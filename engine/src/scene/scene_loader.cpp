@@ -561,6 +561,8 @@ RenderSettings to_render(const json& render, const std::vector<ToolSettings>& to
   r.overlays.octree = render["overlays"]["octree"].get<bool>();
   r.overlays.dofs = render["overlays"]["dofs"].get<bool>();
   r.overlays.hanging = render["overlays"]["hanging"].get<bool>();
+  r.overlays.contacts = render["overlays"]["contacts"].get<bool>();
+  r.overlays.contact_force_scale = render["overlays"]["contact_force_scale"].get<double>();
   return r;
 }
 

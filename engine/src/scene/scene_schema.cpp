@@ -427,7 +427,13 @@ Entry make_scene_schema() {
           object("overlays",
                  {boolean("octree", false, "Draw the octree leaves as a wireframe (deformed)."),
                   boolean("dofs", false, "Draw the DOFs as points."),
-                  boolean("hanging", false, "Draw the hanging slots as points.")},
+                  boolean("hanging", false, "Draw the hanging slots as points."),
+                  boolean("contacts", false,
+                          "Draw the collision samples in contact in the last step as points (orange) and, from each, "
+                          "the force its contact exerted on the tissue as a line (red), over everything else. "
+                          "Nothing without contact."),
+                  number("contact_force_scale", 0.005, greater_than(0),
+                         "Length of a contact force line per newton of force, m/N (0.005: 1 N draws 5 mm).")},
                  "Debug overlays."),
       },
       "Off-screen rendering (EGL) of the deformed object; frames are written when `output.frames` is set.");

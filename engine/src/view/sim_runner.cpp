@@ -220,6 +220,8 @@ void SimRunner::publish_stats(bool force) {
   s.surface_triangles = long(m_world->rest_surface().num_triangles());
   s.tets = model.material_graph() ? model.material_graph()->num_tets() : 0;
   s.material = m_world->material();
+  s.contact = m_world->has_contact();
+  s.contact_forces = m_world->contact_forces();
   m_session.end_step = m_world->steps();
 }
 

@@ -33,6 +33,8 @@ struct SimStats {
   long cuts = 0;                   ///< cuts so far in this world
   long elements = 0, dofs = 0, surface_vertices = 0, surface_triangles = 0, tets = 0;
   Material material;               ///< the material now
+  bool contact = false;            ///< the scene collides (World::has_contact)
+  std::vector<ContactForce> contact_forces;  ///< per colliding tool and body after the last step
 };
 
 class SimRunner {

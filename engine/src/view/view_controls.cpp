@@ -98,6 +98,7 @@ HandTool::HandTool(const Scene& scene, std::size_t index) {
   if (index >= scene.tools.size()) return;
   const ToolSettings& tool = scene.tools[index];
   m_name = tool.name;
+  m_collides = tool.collide;
   const double t = tool.cuts.empty() ? tool.keyframes.front().t : tool.cuts.front().t;
   m_pose = tool_pose(tool, t);
   m_base = m_pose.rotation;
@@ -113,20 +114,29 @@ std::optional<sim::Pose> HandTool::follow(const Camera& camera, const RenderScen
   const Ray ray = pixel_ray(camera, x, y, width, height);
   const double step = 0.01 * (camera.target - camera.position).norm();
   std::optional<double> hit;
-  for (const RenderMesh& mesh : frame.meshes)
-    if (mesh.material == MaterialKind::tissue) {
-      hit = intersect(ray, mesh);
-      break;
-    }
-  if (!hit) {
-    // Off the tissue: the view plane through the last position (or the camera's target).
+  if (!m_collides || !m_placed) {
+    for (const RenderMesh& mesh : frame.meshes)
+      if (mesh.material == MaterialKind::tissue) {
+        hit = intersect(ray, mesh);
+        break;
+      }
+  }
+  // The depth offset the view plane already holds: all of it for a tool that snaps (the plane is through the last
+  // position, offset included); for a colliding tool in the plane, what was applied before (the rest is added now).
+  double applied = m_depth_steps;
+  if (hit) {
+    applied = 0.0;
+  } else {
+    // Off the tissue, or a colliding tool once placed: the view plane through the last position (or the target).
     const Eigen::Vector3d f = forward(camera);
     const Eigen::Vector3d anchor = m_placed ? m_pose.position : camera.target;
     const double along = ray.direction.dot(f);
     if (along <= 1e-9) return std::nullopt;
-    hit = (anchor - ray.origin).dot(f) / along - m_depth_steps * step;
+    if (m_collides && m_placed) applied = m_plane_depth;
+    hit = (anchor - ray.origin).dot(f) / along - applied * step;
   }
   m_pose.position = ray.origin + (*hit + m_depth_steps * step) * ray.direction;
+  m_plane_depth = m_depth_steps;
   m_pose.rotation = m_base * Eigen::AngleAxisd(m_roll_deg * kDegree, Eigen::Vector3d::UnitZ()).toRotationMatrix();
   m_placed = true;
   return m_pose;

@@ -43,7 +43,10 @@ class HandTool {
   void adjust(double depth_steps, double roll_steps);
   /// The pose under the mouse at (x, y) of a window width × height: the tool's origin where the pixel's ray meets
   /// the tissue (the first tissue mesh of `frame`), moved by the depth offset along the ray; off the tissue, where
-  /// the ray meets the view plane through the last position. Nullopt when the ray meets neither.
+  /// the ray meets the view plane through the last position. Nullopt when the ray meets neither. A tool that
+  /// collides meets the tissue only to be placed the first time; after that it moves in the view plane through its
+  /// last position (and in depth by the offset): the tissue it pushed away must not pull it deeper at the next move
+  /// (the deformed surface under the mouse is where the tool itself pushed it).
   std::optional<sim::Pose> follow(const Camera& camera, const RenderScene& frame, double x, double y, int width,
                                   int height);
   [[nodiscard]] const sim::Pose& pose() const { return m_pose; }
@@ -57,6 +60,8 @@ class HandTool {
   double m_depth_steps = 0.0;  // along the view ray, steps
   sim::Pose m_pose;            // the last pose given
   bool m_placed = false;       // m_pose came from follow()
+  bool m_collides = false;     // the tool takes part in contact: it snaps onto the tissue only when first placed
+  double m_plane_depth = 0.0;  // depth steps already applied to m_pose (a colliding tool's view-plane motion)
 };
 
 }  // namespace octocut::engine

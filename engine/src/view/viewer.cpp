@@ -64,6 +64,10 @@ struct Input {
   double roll_steps = 0.0;   // A/D presses, + counter-clockwise about the tool axis
   double zoom_steps = 0.0;   // Shift+wheel notches
   bool pose_dirty = false;   // the tool must follow the mouse again
+  // Where the pointer was last seen, window pixels; kept from frame to frame. X reports the pointer's position when a
+  // window is mapped under it or the pointer enters it (GLFW passes that on as a cursor position): only a position
+  // that differs from the last one seen is a move of the hand.
+  double pointer_x = 0.0, pointer_y = 0.0;
 };
 
 Input& input_of(GLFWwindow* w) { return *static_cast<Input*>(glfwGetWindowUserPointer(w)); }
@@ -106,8 +110,12 @@ extern "C" void on_mouse_button(GLFWwindow* w, int button, int action, int) {
   if (button == GLFW_MOUSE_BUTTON_LEFT && action == GLFW_PRESS) input_of(w).cut = true;
 }
 
-extern "C" void on_cursor(GLFWwindow* w, double, double) {
-  if (!ImGui::GetIO().WantCaptureMouse) input_of(w).pose_dirty = true;
+extern "C" void on_cursor(GLFWwindow* w, double x, double y) {
+  Input& in = input_of(w);
+  const bool moved = x != in.pointer_x || y != in.pointer_y;
+  in.pointer_x = x;
+  in.pointer_y = y;
+  if (moved && !ImGui::GetIO().WantCaptureMouse) in.pose_dirty = true;
 }
 
 // The window and its GL context: exit 2 with a clear message when there is no display.
@@ -121,8 +129,11 @@ std::optional<std::string> open_display() {
 
 // Gives this thread, and the threads it starts from now on (Mesa llvmpipe's rasteriser threads start with the GL
 // context), a lower CPU priority than the simulation thread started before: on a machine whose cores software GL
-// and the simulation share, drawing then takes what the simulation leaves. Best effort (nice +10 of this thread).
-void lower_drawing_priority() { (void)setpriority(PRIO_PROCESS, pid_t(syscall(SYS_gettid)), 10); }
+// and the simulation share, drawing then takes what the simulation leaves. Best effort (nice +19 of this thread):
+// under other load the scheduler shares the CPU among sessions first and by nice only inside one, so with +10 the
+// window's three threads (this one and llvmpipe's two) took about a quarter of the viewer's share from the simulation
+// (viewer step ÷ headless step 1.40 at a load average of 11); +19 leaves them about 4 %.
+void lower_drawing_priority() { (void)setpriority(PRIO_PROCESS, pid_t(syscall(SYS_gettid)), 19); }
 
 std::optional<std::string> open_window(Glfw& glfw, const std::string& title, int width, int height) {
   glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 3);
@@ -245,6 +256,7 @@ void Viewer::handle_input(Input& in) {
 
 void Viewer::run() {
   Input in;
+  glfwGetCursorPos(m_window, &in.pointer_x, &in.pointer_y);  // where the pointer is as the window opens: no move
   glfwSetWindowUserPointer(m_window, &in);
   const auto frame_period = std::chrono::microseconds(16667);  // at most 60 frames per second
   while (!glfwWindowShouldClose(m_window)) {
@@ -263,7 +275,7 @@ void Viewer::run() {
     }
     handle_input(in);
     draw_frame(in);
-    in = Input{};
+    in = Input{.pointer_x = in.pointer_x, .pointer_y = in.pointer_y};
     if (const std::string e = m_runner.error(); !e.empty()) throw std::runtime_error(e);
     m_frame_ms = sim::ms_since(t0);
     const auto spent = sim::Clock::now() - t0;
@@ -374,8 +386,22 @@ void Viewer::panel_controls(const SimStats& s) {
     bool changed = ImGui::Checkbox("octree", &m_overlays.octree);
     changed |= ImGui::Checkbox("DOFs", &m_overlays.dofs);
     changed |= ImGui::Checkbox("hanging slots", &m_overlays.hanging);
+    if (s.contact) {
+      changed |= ImGui::Checkbox("contact points and forces", &m_overlays.contacts);
+      double mm_per_n = 1e3 * m_overlays.contact_force_scale;
+      ImGui::InputDouble("force line (mm/N)", &mm_per_n, 0.0, 0.0, "%.4g");
+      if (ImGui::IsItemDeactivatedAfterEdit() && mm_per_n > 0.0) {
+        m_overlays.contact_force_scale = 1e-3 * mm_per_n;
+        changed = true;
+      }
+      for (const ContactForce& f : s.contact_forces) {
+        const double n = std::sqrt(f.force_n[0] * f.force_n[0] + f.force_n[1] * f.force_n[1] + f.force_n[2] * f.force_n[2]);
+        ImGui::Text("  %s: |F| %.3f N, deepest %.3f mm", f.name.c_str(), n, 1e3 * f.max_penetration_m);
+      }
+    } else {
+      ImGui::TextDisabled("contact points, forces: nothing collides");
+    }
     if (changed) m_runner.set_overlays(m_overlays);
-    ImGui::TextDisabled("contact points, forces: no contact yet");
   }
   if (ImGui::CollapsingHeader("material", ImGuiTreeNodeFlags_DefaultOpen)) {
     bool edited = false;

@@ -373,6 +373,36 @@ TEST_F(GoldenTest, DebugOverlays) {
     EXPECT_EQ(pixel_at(image, scene.camera, p.cast<double>()), (std::array<int, 3>{255, 204, 51})) << p.transpose();
 }
 
+// Lines on top (the contact forces) show through the meshes; depth-tested lines (the octree) do not. A magenta segment
+// through the middle of a box: hidden unless on top, where the pixels on it are magenta.
+TEST_F(GoldenTest, LinesOnTopShowThroughMeshes) {
+  RenderScene scene = base_scene();
+  scene.meshes.push_back(box({-1.0f, -1.0f, -1.0f}, {1.0f, 1.0f, 1.0f}));
+  scene.camera.position = {2.5, -4.0, 3.0};
+  OverlayLines line;
+  line.color = Eigen::Vector3f(1.0f, 0.0f, 1.0f);
+  line.endpoints = {{-0.6f, 0.0f, 0.0f}, {0.6f, 0.0f, 0.0f}};
+  // Magenta pixels within a pixel of the segment's projected middle and quarter points.
+  const auto magenta_near = [&](const Image& image) {
+    int n = 0;
+    for (const double s : {-0.3, 0.0, 0.3}) {
+      const Eigen::Vector3d p = project_to_pixel(scene.camera, image.width, image.height, {s, 0.0, 0.0});
+      bool found = false;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const auto c = pixel(image, int(std::floor(p.x())) + dx, int(std::floor(p.y())) + dy);
+          found |= c[0] > 200 && c[1] < 60 && c[2] > 200;
+        }
+      n += found;
+    }
+    return n;
+  };
+  scene.lines = {line};
+  EXPECT_EQ(magenta_near(s_renderer->render(scene)), 0);
+  scene.lines[0].on_top = true;
+  EXPECT_EQ(magenta_near(s_renderer->render(scene)), 3);
+}
+
 }  // namespace
 }  // namespace octocut::engine
 

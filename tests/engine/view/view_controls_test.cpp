@@ -136,5 +136,47 @@ TEST(ViewControls, TheToolInTheHandGoesWhereTheMousePointsOnTheTissue) {
   EXPECT_NEAR((pose->position - last).dot(f), 0.0, 1e-9);
 }
 
+TEST(ViewControls, AToolThatCollidesMovesInTheViewPlaneOncePlaced) {
+  // Placed on the tissue like any tool; then the tissue it pushed moves away from the camera (the frame shows it
+  // 1 mm lower), and the next move keeps the tool in the view plane through where it was, not on the moved surface.
+  Scene scene;
+  ToolSettings tool;
+  tool.name = "punch";
+  tool.collide = true;
+  tool.keyframes = {PoseKey{0.0, {0.0, 0.0, 0.0}, {0.0, 0.0, 0.0}}};
+  scene.tools.push_back(tool);
+  HandTool hand(scene, 0);
+  const Camera c = camera();
+  RenderScene frame;
+  frame.meshes.push_back(floor(0.0f));
+  const Eigen::Vector3d on = {0.004, -0.003, 0.0};
+  const Eigen::Vector3d px = project_to_pixel(c, kW, kH, on);
+  std::optional<sim::Pose> pose = hand.follow(c, frame, px.x(), px.y(), kW, kH);
+  ASSERT_TRUE(pose.has_value());
+  EXPECT_TRUE(pose->position.isApprox(on, 1e-6));
+  frame.meshes[0] = floor(-0.001f);
+  const Eigen::Vector3d next = {0.006, -0.002, 0.0};
+  const Eigen::Vector3d px2 = project_to_pixel(c, kW, kH, next);
+  pose = hand.follow(c, frame, px2.x(), px2.y(), kW, kH);
+  ASSERT_TRUE(pose.has_value());
+  const Eigen::Vector3d f = (c.target - c.position).normalized();
+  EXPECT_NEAR((pose->position - on).dot(f), 0.0, 1e-9);  // the view plane through the first position
+  const Ray ray = pixel_ray(c, px2.x(), px2.y(), kW, kH);
+  EXPECT_LT((pose->position - ray.origin).cross(ray.direction).norm(), 1e-9);  // under the mouse
+  // One step deeper: along the ray by 1 % of the eye-target distance, from the plane.
+  const Eigen::Vector3d before = pose->position;
+  hand.adjust(1.0, 0.0);
+  pose = hand.follow(c, frame, px2.x(), px2.y(), kW, kH);
+  EXPECT_TRUE(pose->position.isApprox(before + 0.01 * (c.target - c.position).norm() * ray.direction, 1e-9));
+  // A tool that does not collide follows the surface as it is drawn.
+  scene.tools[0].collide = false;
+  HandTool free_hand(scene, 0);
+  frame.meshes[0] = floor(0.0f);
+  (void)free_hand.follow(c, frame, px.x(), px.y(), kW, kH);
+  frame.meshes[0] = floor(-0.001f);
+  pose = free_hand.follow(c, frame, px2.x(), px2.y(), kW, kH);
+  EXPECT_NEAR(pose->position.z(), -0.001, 1e-6);
+}
+
 }  // namespace
 }  // namespace octocut::engine

@@ -5,6 +5,7 @@
 
 #include "octocut/engine/render/render_scene.hpp"
 #include "octocut/engine/scene/scene.hpp"
+#include "octocut/sim/contact.hpp"
 #include "octocut/sim/object.hpp"
 #include "octocut/sim/surface.hpp"
 
@@ -42,5 +43,12 @@ Camera make_camera(const CameraSettings& settings, const sim::Box3& bounds);
 /// hanging slots as points. `slots` and `dofs` are the current positions (8 * num_elements and num_dofs, m).
 void add_overlays(RenderScene& scene, const OverlaySettings& settings, const sim::ObjectModel& model,
                   const std::vector<sim::Vec3>& slots, const std::vector<sim::Vec3>& dofs);
+
+/// Appends the contact overlay when `settings.contacts` is set: the collision samples of `contacts` at DOF positions
+/// `dofs` (num_dofs, m) as orange points, and from each the force `outcomes` says its contact exerted on the tissue
+/// (N, same order; none when empty, as after a failed step) as a red line `settings.contact_force_scale` m/N long,
+/// drawn on top. Nothing without contacts.
+void add_contact_overlay(RenderScene& scene, const OverlaySettings& settings, const std::vector<sim::Contact>& contacts,
+                         const std::vector<sim::ContactOutcome>& outcomes, const std::vector<sim::Vec3>& dofs);
 
 }  // namespace octocut::engine

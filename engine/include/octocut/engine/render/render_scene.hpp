@@ -41,6 +41,9 @@ struct RenderLight {
 struct OverlayLines {
   std::vector<Eigen::Vector3f> endpoints;           ///< world positions, m (2 per segment)
   Eigen::Vector3f color = Eigen::Vector3f::Ones();  ///< RGB, [0, 1]
+  /// Drawn over the meshes without the depth test (contact forces, which lie inside the tissue or the tool); else
+  /// depth-tested against them.
+  bool on_top = false;
 };
 
 /// Debug points (e.g. DOFs or hanging slots), all of one colour and size.

@@ -104,6 +104,8 @@ struct OverlaySettings {
   bool octree = false;   ///< wireframe of the octree leaves
   bool dofs = false;     ///< the DOFs as points
   bool hanging = false;  ///< the hanging slots as points
+  bool contacts = false;  ///< the active contact samples as points, their forces on the tissue as lines
+  double contact_force_scale = 0.005;  ///< length of a contact force line per newton, m/N
 };
 
 /// One keyframe of a rigid pose (render props and tools): where the local frame is at time t. Poses are interpolated

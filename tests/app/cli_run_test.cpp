@@ -24,15 +24,11 @@
 namespace {
 
 namespace fs = std::filesystem;
+using octocut::test::read_json;
 using nlohmann::json;
 
 using octocut::test::CommandResult;
 using octocut::test::run_octocut;
-
-json read_json(const fs::path& p) {
-  std::ifstream in(p);
-  return json::parse(in);
-}
 
 class CliRunTest : public octocut::test::TempDirTest {
  protected:

@@ -19,15 +19,11 @@
 namespace {
 
 namespace fs = std::filesystem;
+using octocut::test::read_json;
 using nlohmann::json;
 using namespace octocut;
 using test::CommandResult;
 using test::run_octocut;
-
-json read_json(const fs::path& p) {
-  std::ifstream in(p);
-  return json::parse(in);
-}
 
 // The report without its timing keys.
 std::string without_timings(const json& report) { return test::report_without_timings(report); }

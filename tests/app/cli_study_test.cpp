@@ -12,6 +12,7 @@
 #include <string>
 
 #include "common/cli_util.hpp"
+#include "common/report_util.hpp"
 #include "common/temp_dir.hpp"
 #include "octocut/engine/io/io.hpp"
 #include "octocut/engine/render/frame_writer.hpp"
@@ -19,6 +20,7 @@
 namespace {
 
 namespace fs = std::filesystem;
+using octocut::test::read_json;
 using nlohmann::json;
 using octocut::test::run_octocut;
 
@@ -27,8 +29,6 @@ const std::string kCube = std::string(OCTOCUT_SOURCE_DIR) + "/docs/studies/cube_
 // A tiny sweep: uniform levels 3-5 with CHOLMOD, two PCG tolerances at level 4 (trilinear only: 5 cases, ~2 s).
 const std::string kTinySweep =
     " --set '/study/levels=[3,4,5]' --set '/study/tolerances=[1e-2,1e-6]' --set '/study/elements=[\"trilinear\"]'";
-
-json read_json(const fs::path& p) { return json::parse(octocut::engine::read_file(p)); }
 
 using Vec = std::array<double, 3>;
 Vec vec(const json& j) { return {j[0].get<double>(), j[1].get<double>(), j[2].get<double>()}; }

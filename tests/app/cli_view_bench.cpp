@@ -31,6 +31,8 @@
 #include <vector>
 
 #include "common/cli_util.hpp"
+#include "common/report_util.hpp"
+#include "octocut/engine/io/io.hpp"
 #include "common/temp_dir.hpp"
 #include "common/xvfb.hpp"
 #include "octocut/engine/render/camera.hpp"
@@ -38,21 +40,10 @@
 namespace {
 
 namespace fs = std::filesystem;
+using octocut::test::read_json;
 using nlohmann::json;
 
 constexpr int kWidth = 1280, kHeight = 720;  // the scene's render size, the viewer's window
-
-json read_json(const fs::path& p) {
-  std::ifstream in(p);
-  return json::parse(in);
-}
-
-std::string read_text(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 // The 1-minute load average (/proc/loadavg), -1 where there is none.
 double load_average() {
@@ -70,7 +61,7 @@ double env_number(const char* name, double fallback) {
 // The step count of the viewer's last status line in its log (0 before the first).
 long logged_steps(const fs::path& log) {
   static const std::regex line(R"(\[view\] t = [0-9.]+ s  steps ([0-9]+))");
-  const std::string text = read_text(log);
+  const std::string text = octocut::engine::read_file(log);
   long steps = 0;
   for (auto it = std::sregex_iterator(text.begin(), text.end(), line); it != std::sregex_iterator(); ++it)
     steps = std::stol((*it)[1]);
@@ -130,7 +121,7 @@ class ViewBench : public octocut::test::TempDirTest {
     Round r;
     r.load = load_average();
     octocut::test::Xvfb xvfb(dir / "xvfb.log", "1600x900x24");  // the whole window on the screen
-    EXPECT_FALSE(xvfb.display().empty()) << read_text(dir / "xvfb.log");
+    EXPECT_FALSE(xvfb.display().empty()) << octocut::engine::read_file(dir / "xvfb.log");
     const std::string x = "DISPLAY=" + xvfb.display() + " timeout 60 xdotool ";
     // The pointer off the window's area (1280×720 at the top left of 1600×900) before the window opens.
     EXPECT_EQ(std::system((x + "mousemove 1500 850").c_str()), 0);
@@ -139,7 +130,7 @@ class ViewBench : public octocut::test::TempDirTest {
         {OCTOCUT_EXE, "view", scene, "--record", record.string(), "--out", (dir / "view").string()},
         {"DISPLAY=" + xvfb.display()}, dir / "view.log");
     EXPECT_EQ(std::system((x + "search --sync --onlyvisible --name octocut >/dev/null").c_str()), 0)
-        << read_text(dir / "view.log");
+        << octocut::engine::read_file(dir / "view.log");
     EXPECT_EQ(std::system((x + hand_script(seconds)).c_str()), 0);
     // A median needs steps: on a loaded machine the session goes on (the punch held where the script left it) until
     // it has OCTOCUT_VIEW_BENCH_MIN_STEPS steps, for at most a minute more.
@@ -147,7 +138,7 @@ class ViewBench : public octocut::test::TempDirTest {
     for (int i = 0; i < 600 && logged_steps(dir / "view.log") < min_steps; ++i)
       std::this_thread::sleep_for(std::chrono::milliseconds(100));
     EXPECT_EQ(std::system((x + "search --name octocut key Escape").c_str()), 0);
-    EXPECT_EQ(viewer.wait_exit(std::chrono::seconds(120)), 0) << read_text(dir / "view.log");
+    EXPECT_EQ(viewer.wait_exit(std::chrono::seconds(120)), 0) << octocut::engine::read_file(dir / "view.log");
     const json view = read_json(dir / "view" / "report.json");
     const octocut::test::CommandResult run = octocut::test::run_octocut(
         "run '" + scene + "' --replay '" + record.string() + "' --no-render --quiet --out '" + (dir / "run").string() +

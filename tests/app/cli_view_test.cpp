@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "common/cli_util.hpp"
+#include "common/report_util.hpp"
 #include "common/temp_dir.hpp"
 #include "common/xvfb.hpp"
 #include "octocut/engine/io/io.hpp"
@@ -36,6 +37,7 @@
 namespace {
 
 namespace fs = std::filesystem;
+using octocut::test::read_json;
 using nlohmann::json;
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
@@ -46,24 +48,12 @@ using octocut::test::run_octocut;
 
 constexpr int kWidth = 800, kHeight = 450;  // the viewer's window, pixels
 
-json read_json(const fs::path& p) {
-  std::ifstream in(p);
-  return json::parse(in);
-}
-
-std::string read_text(const fs::path& p) {
-  std::ifstream in(p);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
 class CliViewTest : public octocut::test::TempDirTest {
  protected:
   void SetUp() override {
     TempDirTest::SetUp();
     m_xvfb = std::make_unique<Xvfb>(m_dir / "xvfb.log");
-    ASSERT_FALSE(m_xvfb->display().empty()) << "Xvfb did not start: " << read_text(m_dir / "xvfb.log");
+    ASSERT_FALSE(m_xvfb->display().empty()) << "Xvfb did not start: " << octocut::engine::read_file(m_dir / "xvfb.log");
   }
   void TearDown() override {
     m_viewer.reset();
@@ -91,7 +81,7 @@ class CliViewTest : public octocut::test::TempDirTest {
   }
 
   // The viewer's log.
-  [[nodiscard]] std::string log() const { return read_text(m_dir / "view.log"); }
+  [[nodiscard]] std::string log() const { return octocut::engine::read_file(m_dir / "view.log"); }
 
   // The simulated time of the viewer's last status line, s (-1 before the first).
   [[nodiscard]] double sim_time() const {
@@ -242,7 +232,7 @@ TEST_F(CliViewTest, MouseCutRecordReplayAndScreenshot) {
       octocut::engine::write_file_atomic(tolerance_file, "{\"threshold\": 2, \"max_diff\": 48, \"max_fraction\": 0.01}\n");
   }
   const auto reference = octocut::engine::decode_png(octocut::engine::read_file(golden), golden.string());
-  const json tol = json::parse(read_text(tolerance_file));
+  const json tol = json::parse(octocut::engine::read_file(tolerance_file));
   ASSERT_EQ(reference.width, after.width);
   ASSERT_EQ(reference.height, after.height);
   int differing = 0, worst = 0;

@@ -1,12 +1,22 @@
 #pragma once
-// A run report without what depends on the machine and its load: the wall time, the real-time factor, the timing
-// block and each cut's stage timings and latency. Two runs of the same scene, seed and thread count must agree on
-// everything else, bit for bit (the determinism rule).
+// Reading the JSON files a run writes (report, session, study), and a run report without what depends on the
+// machine and its load.
+#include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
 
 namespace octocut::test {
 
+/// The JSON document in a file; throws nlohmann::json::parse_error when it is missing or malformed.
+inline nlohmann::json read_json(const std::filesystem::path& path) {
+  std::ifstream in(path);
+  return nlohmann::json::parse(in);
+}
+
+/// The report without the wall time, the real-time factor, the timing block and each cut's stage timings and
+/// latency. Two runs of the same scene, seed and thread count must agree on everything else, bit for bit (the
+/// determinism rule).
 inline std::string report_without_timings(nlohmann::json report) {
   report.erase("timing_ms");
   report.erase("wall_time_s");

@@ -1,13 +1,25 @@
 #include "octocut/sim/linear_solver.hpp"
 
 #include <cholmod.h>
+#include <chrono>
 
 #include "octocut/sim/parallel.hpp"
 #include <algorithm>
 #include <cmath>
+#include <future>
+#include <memory>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 #include <vector>
+
+extern "C" {
+// Single-precision BLAS (the BLAS CHOLMOD links, OpenBLAS on Debian).
+void strsv_(const char* uplo, const char* trans, const char* diag, const int* n, const float* a, const int* lda,
+            float* x, const int* incx);
+void sgemv_(const char* trans, const int* m, const int* n, const float* alpha, const float* a, const int* lda,
+            const float* x, const int* incx, const float* beta, float* y, const int* incy);
+}
 
 namespace octocut::sim {
 
@@ -86,7 +98,28 @@ class CholmodFactor {
     if (m_L == nullptr) return false;
     cholmod_sparse a = view(A);
     cholmod_factorize(&a, m_L, &m_c);
-    return m_c.status >= CHOLMOD_OK && m_L->minor == m_L->n;
+    const bool ok = m_c.status >= CHOLMOD_OK && m_L->minor == m_L->n;
+    if (ok && m_keep_single) {
+      const double* x = static_cast<const double*>(m_L->x);
+      m_single.assign(x, x + m_L->xsize);
+    }
+    return ok;
+  }
+  /// Keeps a single-precision copy of each factor for solve_single.
+  void keep_single(bool keep) { m_keep_single = keep; }
+  /// x = (L L^T)^-1 b (in A's ordering) with the single-precision copy of the last factor, in double arithmetic:
+  /// the preconditioner of PCG, whose triangular solves are bound by the memory traffic of L. False without a copy.
+  bool solve_single(const VecX& b, VecX& x) {
+    if (m_L == nullptr || m_single.size() != m_L->xsize || b.size() != Eigen::Index(m_L->n)) return false;
+    const int n = int(m_L->n);
+    const int* perm = static_cast<const int*>(m_L->Perm);
+    m_perm.resize(std::size_t(n));
+    for (int k = 0; k < n; ++k) m_perm[std::size_t(k)] = float(b[perm[k]]);
+    forward_single(m_perm.data());
+    backward_single(m_perm.data());
+    x.resize(n);
+    for (int k = 0; k < n; ++k) x[perm[k]] = double(m_perm[std::size_t(k)]);
+    return true;
   }
   /// x = A^-1 b with the last factor. False when CHOLMOD fails.
   bool solve(const VecX& b, VecX& x) {
@@ -106,6 +139,8 @@ class CholmodFactor {
   }
   /// Block size of the graph the last ordering was computed on: 3 (FEM system) or 1 (scalar pattern).
   [[nodiscard]] int block_size() const { return m_block; }
+  /// Whether a symbolic analysis is held (analyze succeeded).
+  [[nodiscard]] bool analyzed() const { return m_L != nullptr; }
   /// Floating-point operations of one numeric factorisation, sum over columns of count^2 (0 before analyze).
   [[nodiscard]] double factor_flops() const { return m_factor_flops; }
   /// Entries of L, sum over columns of count (0 before analyze).
@@ -115,6 +150,51 @@ class CholmodFactor {
   void free_factor() {
     if (m_L) cholmod_free_factor(&m_L, &m_c);
     m_L = nullptr;
+    m_single.clear();
+  }
+
+  // y = L^-1 y in place, with the single-precision copy and single-precision BLAS. Supernode s holds columns
+  // super[s] .. super[s + 1) of L as a column-major nsrow x nscol block at px[s], its rows listed at s[pi[s]] (the
+  // first nscol are its own columns).
+  void forward_single(float* y) {
+    const int* super = static_cast<const int*>(m_L->super);
+    const int* pi = static_cast<const int*>(m_L->pi);
+    const int* px = static_cast<const int*>(m_L->px);
+    const int* rows = static_cast<const int*>(m_L->s);
+    const int one = 1;
+    const float f1 = 1.0f, f0 = 0.0f;
+    for (int sn = 0; sn < int(m_L->nsuper); ++sn) {
+      int k1 = super[sn], nscol = super[sn + 1] - k1, nsrow = pi[sn + 1] - pi[sn];
+      const float* L = m_single.data() + px[sn];
+      strsv_("L", "N", "N", &nscol, L, &nsrow, y + k1, &one);
+      int nb = nsrow - nscol;  // the rows below: t = L_below y_diag, then scattered
+      if (nb == 0) continue;
+      m_t.resize(std::size_t(nb));
+      sgemv_("N", &nb, &nscol, &f1, L + nscol, &nsrow, y + k1, &one, &f0, m_t.data(), &one);
+      const int* r = rows + pi[sn] + nscol;
+      for (int i = 0; i < nb; ++i) y[r[i]] -= m_t[std::size_t(i)];
+    }
+  }
+  // y = L^-T y in place (see forward_single).
+  void backward_single(float* y) {
+    const int* super = static_cast<const int*>(m_L->super);
+    const int* pi = static_cast<const int*>(m_L->pi);
+    const int* px = static_cast<const int*>(m_L->px);
+    const int* rows = static_cast<const int*>(m_L->s);
+    const int one = 1;
+    const float f1 = 1.0f, fm1 = -1.0f;
+    for (int sn = int(m_L->nsuper) - 1; sn >= 0; --sn) {
+      int k1 = super[sn], nscol = super[sn + 1] - k1, nsrow = pi[sn + 1] - pi[sn];
+      const float* L = m_single.data() + px[sn];
+      int nb = nsrow - nscol;
+      if (nb > 0) {
+        const int* r = rows + pi[sn] + nscol;
+        m_t.resize(std::size_t(nb));
+        for (int i = 0; i < nb; ++i) m_t[std::size_t(i)] = y[r[i]];
+        sgemv_("T", &nb, &nscol, &fm1, L + nscol, &nsrow, m_t.data(), &one, &f1, y + k1, &one);
+      }
+      strsv_("L", "T", "N", &nscol, L, &nsrow, y + k1, &one);
+    }
   }
 
   // A square, compressed, sorted CSC matrix with int indices (n columns, nzmax entries) as a symmetric CHOLMOD
@@ -239,6 +319,10 @@ class CholmodFactor {
   cholmod_common m_cb{};  ///< the block analysis'
   std::size_t m_default_nrelax[3] = {4, 16, 48};
   cholmod_factor* m_L = nullptr;
+  bool m_keep_single = false;
+  std::vector<float> m_single;  ///< L's values in single precision (L->xsize), when kept
+  std::vector<float> m_perm;    ///< solve_single's permuted right-hand side (n)
+  std::vector<float> m_t;       ///< solve_single's rows below a supernode (at most n)
   cholmod_dense* m_x = nullptr;  ///< solve2 workspaces, kept
   cholmod_dense* m_y = nullptr;
   cholmod_dense* m_e = nullptr;
@@ -246,6 +330,29 @@ class CholmodFactor {
   double m_factor_flops = 0.0;    ///< of one numeric factorisation
   double m_factor_entries = 0.0;  ///< nnz(L)
 };
+
+// A numeric factorisation running on a second thread: of its own copy of a matrix, into its own factor (which holds,
+// or analyses first, the symbolic factorisation of that pattern).
+struct BackgroundFactorization {
+  SpMat A;                                ///< the matrix it factorises (a copy)
+  std::unique_ptr<CholmodFactor> factor;  ///< where
+  std::future<bool> done;                 ///< whether it succeeded
+  int solves = 0;                         ///< solves begun since it started
+  double iteration_flops = 0.0;           ///< PCG operations of those solves
+};
+
+// Background factorisations whose solver no longer wants them (replaced after a cut, or refreshed at once) are kept
+// here until they end, so that nobody waits for them: each call frees the ended ones, and the list's destruction at
+// exit waits for the rest.
+void retire_factorization(std::unique_ptr<BackgroundFactorization> f) {
+  static std::mutex mutex;
+  static std::vector<std::unique_ptr<BackgroundFactorization>> retired;
+  const std::lock_guard lock(mutex);
+  std::erase_if(retired, [](const auto& r) {
+    return r->done.wait_for(std::chrono::seconds(0)) == std::future_status::ready;
+  });
+  if (f) retired.push_back(std::move(f));
+}
 
 // Direct solver: supernodal LL^T; the symbolic analysis is reused until the pattern changes.
 class CholmodSolver final : public LinearSolver {
@@ -289,19 +396,38 @@ class CholmodSolver final : public LinearSolver {
 // operations: two triangular solves with L, a product with A, five vector updates. A factorisation is the purchase:
 // its operations divided by factor_flop_advantage, because its dense supernodal kernels do that many more operations
 // per second than the triangular solves. Once the rent paid since the last factorisation reaches the purchase price,
-// the next solve refactorises first. When the iteration count grows linearly with the factor's age (an object that
-// keeps rotating, contacts that keep changing) this period minimises the mean cost per step; an object whose
-// iterations stay at the baseline never pays for a factorisation it would not gain from. The rule counts iterations
-// and operations only, so it is deterministic. A solve that does not converge, or would pay more than a
-// factorisation in iterations beyond the baseline, refactorises at once and continues from x.
+// the factor is refreshed. When the iteration count grows linearly with the factor's age (an object that keeps
+// rotating, contacts that keep changing) this period minimises the mean cost per step; an object whose iterations
+// stay at the baseline never pays for a factorisation it would not gain from.
+//
+// The refresh runs in the background (factor_lag_solves > 0): the solve that finds the rent paid starts a
+// factorisation of its own matrix on a second thread, into a second factor with the same symbolic analysis, and
+// goes on with the old one; the solve factor_lag_solves later waits for it if need be and swaps it in. So the step
+// that would have stalled on the factorisation takes no longer than its neighbours, while the two cores are shared
+// between the step and the factorisation. The swap happens at a fixed solve, whatever the timing, and the factor is
+// that of a fixed matrix, so the iterates stay deterministic. The first factor of a pattern, and the refresh after a
+// solve that does not converge (or would pay more than a factorisation in iterations beyond the baseline), are
+// computed at once: that solve then continues from x with the fresh factor. The rule counts iterations and
+// operations only, so it is deterministic.
 class PcgSolver final : public LinearSolver {
  public:
-  explicit PcgSolver(const LinearSolverOptions& o) : m_opt(o), m_use_cholesky(o.preconditioner != "jacobi") {
+  explicit PcgSolver(const LinearSolverOptions& o)
+      : m_opt(o), m_use_cholesky(o.preconditioner != "jacobi"), m_single(o.single_precision_factor) {
     if (o.preconditioner != "jacobi" && o.preconditioner != "cholesky")
       throw std::invalid_argument("unknown preconditioner '" + o.preconditioner + "'");
+    if (o.factor_lag_solves < 0) throw std::invalid_argument("factor_lag_solves must be >= 0");
   }
+  ~PcgSolver() override { drop_pending(); }  // a cut replaces the solver: it does not wait for the refresh
+  PcgSolver(const PcgSolver&) = delete;
+  PcgSolver& operator=(const PcgSolver&) = delete;
+
   void analyze_pattern(const SpMat& A) override {
-    if (m_use_cholesky) m_llt.analyze(A);
+    drop_pending();
+    if (m_use_cholesky) {
+      m_front->keep_single(m_single);
+      m_front->analyze(A);
+      m_back.reset();  // a spare is analysed in the background, when first needed
+    }
     m_have_factor = false;
   }
   bool factorize(const SpMat& A) override {
@@ -320,58 +446,132 @@ class PcgSolver final : public LinearSolver {
   SolveInfo solve(const VecX& b, VecX& x) override {
     SolveInfo info;
     if (x.size() != b.size() || !x.allFinite()) x = VecX::Zero(b.size());
-    if (m_use_cholesky && m_rent >= purchase_price()) {
-      if (!refactor()) return info;
-      info.refactorized = true;
+    bool own_factor = false;  // the factor is that of this solve's matrix
+    if (m_use_cholesky) {
+      if (m_pending && pending_due()) adopt_pending(info);
+      if (!m_pending && m_rent >= purchase_price()) {
+        if (m_opt.factor_lag_solves > 0) {
+          start_pending();
+        } else {
+          if (!refactor()) return info;
+          info.refactorized = own_factor = true;
+        }
+      }
     }
     // With a lagged factor, a solve that would pay more than a factorisation in iterations stops and buys one.
     // (Once the baseline is known: from the second solve after a factorisation on.)
     int cap = m_opt.max_iterations;
-    if (m_use_cholesky && !info.refactorized && m_solves_since_factor >= 2)
+    if (m_use_cholesky && !own_factor && m_solves_since_factor >= 2)
       cap = int(std::min<double>(cap, m_baseline + 1.0 + std::floor(purchase_price() / iteration_flops())));
     run_pcg(b, x, info, cap);
     if (!m_use_cholesky) return info;
-    pay_rent(info.iterations);
-    // Failed or too slow convergence: refresh the lagged factor from the current matrix and continue from x.
-    if (!info.ok && !info.refactorized) {
-      if (!refactor()) return info;
+    if (!m_pending)
+      pay_rent(info.iterations);
+    else
+      m_pending->iteration_flops += double(info.iterations) * iteration_flops();
+    if (info.ok || own_factor) return info;
+    // Failed or too slow convergence: continue from x with a fresher factor: the background refresh in flight if
+    // there is one, else (or when that does not do) one of the current matrix, computed now.
+    for (const bool wait_pending : {true, false}) {
+      if (wait_pending && !m_pending) continue;
+      if (wait_pending) {
+        adopt_pending(info);
+      } else if (!refactor()) {
+        return info;
+      }
       info.refactorized = true;
       SolveInfo again;
       run_pcg(b, x, again, m_opt.max_iterations);
       info.ok = again.ok;
       info.iterations += again.iterations;
       info.residual = again.residual;
+      if (info.ok) break;
     }
     return info;
   }
   std::string name() const override { return "pcg"; }
-  int ordering_block_size() const override { return m_use_cholesky ? m_llt.block_size() : 0; }
+  int ordering_block_size() const override { return m_use_cholesky ? m_front->block_size() : 0; }
 
  private:
+  // Factorises the current matrix now, into the front factor (BLAS at m_opt.threads). Drops a background refresh
+  // first: its factor would be older than this one.
   bool refactor() {
+    drop_pending();
     const BlasThreadsScope blas(m_opt.threads);
-    m_have_factor = m_llt.factorize(*m_A);
+    m_have_factor = m_front->factorize(*m_A);
+    fresh_factor();
+    return m_have_factor;
+  }
+  // The bookkeeping of a factor just put in place (of the matrix of the solve about to run, or of one
+  // factor_lag_solves older).
+  void fresh_factor() {
     m_rent = 0.0;
     m_solves_since_factor = 0;
-    return m_have_factor;
+  }
+  // Starts factorising a copy of the current matrix into the back factor on a second thread (BLAS at one thread,
+  // the step keeps the other core busy).
+  void start_pending() {
+    m_pending = std::make_unique<BackgroundFactorization>();
+    m_pending->A = *m_A;
+    m_pending->factor = m_back ? std::move(m_back) : std::make_unique<CholmodFactor>();
+    m_pending->factor->keep_single(m_single);
+    CholmodFactor* factor = m_pending->factor.get();
+    const SpMat* A = &m_pending->A;
+    m_pending->done = std::async(std::launch::async, [factor, A] {
+      try {
+        if (!factor->analyzed()) factor->analyze(*A);
+        return factor->factorize(*A);
+      } catch (const std::exception&) {
+        return false;
+      }
+    });
+  }
+  // The solve at which a background refresh is due: waits for it and swaps its factor in. A failed one (the old
+  // matrix was not positive definite, out of memory) leaves the old factor in place with its rent paid, so that the
+  // next solve tries again.
+  void adopt_pending(SolveInfo& info) {
+    const bool ok = m_pending->done.get();
+    std::unique_ptr<CholmodFactor> factor = std::move(m_pending->factor);
+    m_pending.reset();
+    if (!ok) {
+      m_back = std::move(factor);
+      m_rent = purchase_price();
+      return;
+    }
+    m_back = std::move(m_front);
+    m_front = std::move(factor);
+    m_have_factor = true;
+    fresh_factor();
+    info.refactorized = info.background = true;
+  }
+  // Counts the solve that begins, and says whether the refresh in flight is due: factor_lag_solves solves after it
+  // started, or sooner, once the solves since have done as many operations as the factorisation's price (while the
+  // iterations grow fast, the old factor costs more per step and the refresh has had as long as those solves took).
+  bool pending_due() {
+    ++m_pending->solves;
+    return m_pending->solves >= m_opt.factor_lag_solves || m_pending->iteration_flops >= purchase_price();
+  }
+  // Forgets a background refresh without waiting for it (retire_factorization keeps it until it ends).
+  void drop_pending() {
+    if (m_pending) retire_factorization(std::move(m_pending));
   }
   // Counts the solve's iterations beyond the baseline as rent (see the class comment).
   void pay_rent(int iterations) {
     ++m_solves_since_factor;
-    if (m_solves_since_factor == 1) return;  // solved with the factor of its own matrix, or the first solve
+    if (m_solves_since_factor == 1) return;  // the first solve with a new factor
     if (m_solves_since_factor == 2 || iterations < m_baseline) m_baseline = iterations;
     m_rent += double(std::max(0, iterations - m_baseline)) * iteration_flops();
   }
   // Operations of one PCG iteration with the factor: solves with L and L^T, a product with A, five vector updates.
   [[nodiscard]] double iteration_flops() const {
-    return 4.0 * m_llt.factor_entries() + 2.0 * double(m_A->nonZeros()) + 10.0 * double(m_A->rows());
+    return 4.0 * m_front->factor_entries() + 2.0 * double(m_A->nonZeros()) + 10.0 * double(m_A->rows());
   }
   // A factorisation's price in iteration operations (see the class comment).
-  [[nodiscard]] double purchase_price() const { return m_llt.factor_flops() / m_opt.factor_flop_advantage; }
+  [[nodiscard]] double purchase_price() const { return m_front->factor_flops() / m_opt.factor_flop_advantage; }
   void precondition(const VecX& r, VecX& z) {
     if (!m_use_cholesky)
       z = m_inv_diag.cwiseProduct(r);
-    else if (!m_llt.solve(r, z))
+    else if (!(m_single ? m_front->solve_single(r, z) : m_front->solve(r, z)))
       z = r;  // CHOLMOD failed (out of memory): an unpreconditioned step
   }
   void run_pcg(const VecX& b, VecX& x, SolveInfo& info, int max_iterations) {
@@ -412,7 +612,10 @@ class PcgSolver final : public LinearSolver {
 
   LinearSolverOptions m_opt;
   bool m_use_cholesky;
-  CholmodFactor m_llt;
+  std::unique_ptr<CholmodFactor> m_front = std::make_unique<CholmodFactor>();  ///< the factor the solves use
+  std::unique_ptr<CholmodFactor> m_back;      ///< the spare a background refresh fills (null while it runs)
+  std::unique_ptr<BackgroundFactorization> m_pending;  ///< the background refresh in flight, if any
+  bool m_single;  ///< the preconditioner solves with a single-precision copy of the factor
   bool m_have_factor = false;
   double m_rent = 0.0;  ///< iteration operations paid since the last factorisation
   int m_solves_since_factor = 0;

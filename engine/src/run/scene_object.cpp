@@ -160,6 +160,7 @@ sim::SimulatorOptions simulator_options(const Scene& scene) {
   o.linear_solver = s.linear_solver;
   o.tolerance = s.tolerance;
   o.max_iterations = s.max_iterations;
+  o.factor_lag = s.factor_lag;
   o.threads = s.threads;
   o.max_speed = s.max_speed;
   return o;

@@ -398,6 +398,7 @@ SolverSettings to_solver(const json& solver) {
   s.linear_solver = solver["linear_solver"].get<std::string>();
   s.tolerance = solver["tolerance"].get<double>();
   s.max_iterations = solver["max_iterations"].get<int>();
+  s.factor_lag = solver["factor_lag"].get<int>();
   s.threads = solver["threads"].get<int>();
   s.max_speed = solver["max_speed"].get<double>();
   return s;

@@ -239,6 +239,12 @@ Entry make_scene_schema() {
           number("tolerance", 1e-6, open(0, 1), "Relative residual at which iterative solves stop (dimensionless)."),
           integer("max_iterations", 200, closed(1, 100000),
                   "Iteration limit per linear solve (pcg) or per static solve (Newton)."),
+          integer("factor_lag", 0, closed(0, 64),
+                  "`pcg`: when its lagged Cholesky factor is due for a refresh, factorise on a second thread and put "
+                  "the new factor in place this many solves later (sooner once the iterations since have cost as "
+                  "much as a factorisation), so that no step stalls on the factorisation; deterministic, whatever "
+                  "the timing. 0 refreshes inline, in the step that finds it due. The first factor after a cut is "
+                  "always computed inline."),
           integer("threads", 0, closed(0, 256), "Worker threads; 0 uses the hardware concurrency."),
           number("max_speed", 100.0, greater_than(0),
                  "Speed guard, m/s: a step that moves any DOF faster is rolled back."),

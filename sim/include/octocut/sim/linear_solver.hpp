@@ -13,7 +13,8 @@ struct SolveInfo {
   bool ok = false;         ///< converged (pcg) or factor valid (cholmod)
   int iterations = 0;      ///< pcg iterations (0 for a direct solve)
   double residual = 0.0;   ///< final relative residual |b - A x| / |b|
-  bool refactorized = false;  ///< a numeric factorisation ran during this call
+  bool refactorized = false;  ///< a new factor was put in place during this call
+  bool background = false;    ///< pcg: that factor was computed by a background refresh, not by this call
 };
 
 /// A solver for symmetric positive definite systems A x = b (A given with both triangles stored).
@@ -39,9 +40,17 @@ struct LinearSolverOptions {
   /// pcg with the lagged Cholesky preconditioner: how many more floating-point operations per second the supernodal
   /// factorisation does than the triangular solves of a PCG iteration. The factor is refreshed once the iterations
   /// paid for its age cost as much as a factorisation (see make_linear_solver). Measured on the meniscus (7k
-  /// unknowns, 2.3e8 operations per factorisation, 5.1e6 per iteration): a factorisation took as long as 28-30
-  /// iterations, so 45 / 30.
-  double factor_flop_advantage = 1.5;
+  /// unknowns, 2.3e8 operations per factorisation, 5.2e6 per iteration with the single-precision factor): a
+  /// factorisation (49 ms, two threads) took as long as 58 iterations (0.85 ms each), so 44 / 58.
+  double factor_flop_advantage = 0.75;
+  /// pcg with the lagged Cholesky preconditioner: solve with a single-precision copy of the factor (in single
+  /// precision: the triangular solves are bound by the memory traffic of L, which this halves). The preconditioner
+  /// is then the factor's value rounded to single precision, which converges in the same number of iterations.
+  bool single_precision_factor = true;
+  /// pcg with the lagged Cholesky preconditioner: a refresh of the factor runs on a second thread and is swapped in
+  /// this many solves after it started (the solve then waits for it if need be); 0 refreshes at once, stalling that
+  /// solve. The first factor of a pattern, and the refresh after a solve that fails to converge, are always at once.
+  int factor_lag_solves = 0;
   std::string preconditioner = "cholesky";  ///< pcg: "cholesky" (lagged factor) | "jacobi"
   int threads = 1;             ///< BLAS threads during numeric factorisations (one thread otherwise)
 };

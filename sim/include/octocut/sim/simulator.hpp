@@ -24,6 +24,7 @@ struct SimulatorOptions {
   double tolerance = 1e-6;                     ///< relative residual of linear solves and of the static Newton
   int max_iterations = 200;                    ///< pcg iterations per solve; Newton iterations per static solve
   int threads = 0;                             ///< 0 = hardware concurrency
+  int factor_lag = 0;  ///< pcg: solves a background refresh of the lagged factor may take; 0 = refresh inline
   double max_speed = 100.0;                    ///< m/s; a faster DOF makes the step fail and roll back
   int max_halvings = 4;                        ///< retries with half the step before giving up on a step
 };

@@ -76,6 +76,7 @@ struct SolverSettings {
   std::string linear_solver = "pcg";       ///< "cholmod" | "pcg"
   double tolerance = 1e-6;                 ///< relative residual
   int max_iterations = 200;                ///< per linear solve (pcg) / per static solve (Newton)
+  int factor_lag = 0;                      ///< pcg: solves a background refresh of the factor may take; 0 inline
   int threads = 0;                         ///< 0 = auto (hardware concurrency)
   double max_speed = 100.0;                ///< m/s; a guard: faster DOFs roll the step back
 };

@@ -114,6 +114,63 @@ struct FemSystem::Impl {
   std::vector<std::size_t> pair_begin;            // start of each element's pair offsets (num_elements + 1)
   std::vector<int> diag_offsets;                  // per scalar DOF: offset of its diagonal entry (3 num_dofs)
   std::vector<double> rotated;                    // per element R K R^T, scaled (num_elements x 576)
+  // The scatter's parts: part t owns the matrix columns (and coupling rows) of DOFs [part_dof[t], part_dof[t + 1]),
+  // and lists, ascending, the elements that touch them. Rebuilt with the pattern or when the thread count changes.
+  std::vector<int> part_dof;
+  std::vector<std::vector<int>> part_elements;
+  bool parts_stale = true;
+
+  // Splits the DOFs into `parts` ranges and lists each range's elements (see part_dof).
+  void build_parts(int parts) {
+    const int nd = model().num_dofs();
+    part_dof.resize(std::size_t(parts) + 1);
+    for (int t = 0; t <= parts; ++t) part_dof[std::size_t(t)] = int(std::int64_t(nd) * t / parts);
+    part_elements.assign(std::size_t(parts), {});
+    for (int e = 0; e < int(gather.size()); ++e) {
+      int last = -1;
+      for (int t = 0; t < parts; ++t) {
+        for (const GatherEntry& g : gather[std::size_t(e)]) {
+          if (g.dof >= part_dof[std::size_t(t)] && g.dof < part_dof[std::size_t(t) + 1] && last != t) {
+            part_elements[std::size_t(t)].push_back(e);
+            last = t;
+          }
+        }
+      }
+    }
+  }
+
+  // Adds the rotated element matrices' entries whose column DOF lies in [lo, hi) to A's values, and their
+  // prescribed-column terms whose row DOF lies there to `coupling`, over `elements` in ascending order: every sum
+  // then runs in the same order as one serial pass over all elements, whatever the parts.
+  void scatter(const std::vector<int>& elements, int lo, int hi, const std::vector<char>& constrained, const VecX& u,
+               double* val, VecX& coupling) const {
+    for (const int e : elements) {
+      const Eigen::Map<const Mat24> Ke(rotated.data() + 576 * std::size_t(e));
+      const auto& g = gather[std::size_t(e)];
+      const int* off = pair_offsets.data() + pair_begin[std::size_t(e)];
+      for (const GatherEntry& p : g) {
+        const bool row_here = p.dof >= lo && p.dof < hi;
+        for (const GatherEntry& q : g) {
+          const double w = p.w * q.w;
+          if (off[0] >= 0) {
+            if (q.dof >= lo && q.dof < hi) {
+              for (int c = 0; c < 3; ++c) {
+                double* dst = val + off[c];
+                dst[0] += w * Ke(3 * p.corner + 0, 3 * q.corner + c);
+                dst[1] += w * Ke(3 * p.corner + 1, 3 * q.corner + c);
+                dst[2] += w * Ke(3 * p.corner + 2, 3 * q.corner + c);
+              }
+            }
+          } else if (row_here && !constrained[std::size_t(p.dof)]) {
+            // Free row, prescribed column: moves to the right-hand side.
+            coupling.segment<3>(3 * p.dof) +=
+                w * Ke.block<3, 3>(3 * p.corner, 3 * q.corner) * u.segment<3>(3 * q.dof);
+          }
+          off += 3;
+        }
+      }
+    }
+  }
 
   Impl(const ObjectModel& m, Executor& ex) : model_ptr(&m), executor_ptr(&ex) {
     const DofMap& dm = m.dofs();
@@ -153,6 +210,7 @@ struct FemSystem::Impl {
     fill_pair_offsets(bp, constrained);
     pattern_constrained = constrained;
     have_pattern = true;
+    parts_stale = true;
   }
 
   // Scalar CSC of the block pattern: column 3k + c holds rows 3j, 3j + 1, 3j + 2 for every block row j of block
@@ -374,33 +432,21 @@ void FemSystem::assemble_system(double mc, double kc, const ElementFrame& frame,
     }
   });
 
-  // Scatter in a fixed element order: deterministic sums.
+  // Scatter, by parts of the DOFs in parallel, each part in ascending element order: the same sums, in the same
+  // order, as one serial pass (bit-identical for any thread count).
   double* val = A.valuePtr();
   std::fill(val, val + A.nonZeros(), 0.0);
   coupling.setZero(3 * nd);
-  for (int e = 0; e < ne; ++e) {
-    const Eigen::Map<const Mat24> Ke(im.rotated.data() + 576 * std::size_t(e));
-    const auto& g = im.gather[std::size_t(e)];
-    const int* off = im.pair_offsets.data() + im.pair_begin[std::size_t(e)];
-    for (const GatherEntry& p : g) {
-      for (const GatherEntry& q : g) {
-        const double w = p.w * q.w;
-        if (off[0] >= 0) {
-          for (int c = 0; c < 3; ++c) {
-            double* dst = val + off[c];
-            dst[0] += w * Ke(3 * p.corner + 0, 3 * q.corner + c);
-            dst[1] += w * Ke(3 * p.corner + 1, 3 * q.corner + c);
-            dst[2] += w * Ke(3 * p.corner + 2, 3 * q.corner + c);
-          }
-        } else if (!constrained[std::size_t(p.dof)]) {
-          // Free row, prescribed column: moves to the right-hand side.
-          coupling.segment<3>(3 * p.dof) +=
-              w * Ke.block<3, 3>(3 * p.corner, 3 * q.corner) * u.segment<3>(3 * q.dof);
-        }
-        off += 3;
-      }
-    }
+  const int parts = std::max(1, std::min(im.executor_ptr->threads(), nd));
+  if (int(im.part_elements.size()) != parts || im.part_dof.back() != nd || im.parts_stale) {
+    im.build_parts(parts);
+    im.parts_stale = false;
   }
+  im.executor_ptr->parallel_for(parts, 1, [&](int tb, int te) {
+    for (int t = tb; t < te; ++t)
+      im.scatter(im.part_elements[std::size_t(t)], im.part_dof[std::size_t(t)], im.part_dof[std::size_t(t) + 1],
+                 constrained, u, val, coupling);
+  });
 
   // Lumped mass on the diagonal; identity rows for constrained DOFs.
   for (int d = 0; d < nd; ++d) {

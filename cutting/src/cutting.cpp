@@ -223,11 +223,24 @@ sim::TriMesh rest_blade(const sim::ObjectModel& model, const std::vector<sim::Ve
   return blade;
 }
 
+// Near-coincident walls snap together: a rest-space blade within options.min_feature of a recent cut's blade or of
+// another component's blade of this cut (`earlier`), where S's material can be (`region`: S's bounds grown by
+// min_feature), becomes that blade exactly (snap_target), so that its walls coincide with the walls that blade left
+// or leaves instead of landing micrometres beside them.
+void snap_blade(const std::vector<sim::TriMesh>& earlier, const sim::Box3& region, const CutOptions& options,
+                sim::TriMesh& blade, CutOutcome& out) {
+  if (!(options.min_feature > 0.0) || earlier.empty()) return;
+  const int k = snap_target(blade, earlier, region, options.min_feature);
+  if (k < 0) return;
+  blade = earlier[std::size_t(k)];
+  ++out.snapped;
+}
+
 // Stage 1: the leaves whose deformed hexahedra meet the blade, grouped into face- and material-connected
 // components; per component a shape-matching affine map takes the blade into rest space (B'_i), restricted to the
 // component's material (foreign_leaves). No blade when the blade meets no element. Throws StageFailure.
-RestBlades back_transform(const sim::ObjectModel& model, const sim::SimState& state, const CutRequest& request,
-                          const CutOptions& options, CutOutcome& out) {
+RestBlades back_transform(const CutObject& object, const sim::ObjectModel& model, const sim::SimState& state,
+                          const CutRequest& request, const CutOptions& options, CutOutcome& out) {
   const BladeVolume blade(request.blade);
   std::vector<sim::Vec3> slots;
   model.dofs().prolong(state.x, slots);
@@ -236,8 +249,20 @@ RestBlades back_transform(const sim::ObjectModel& model, const sim::SimState& st
   const std::vector<std::vector<int>> groups = touched_components(model, touched);
   out.components = int(groups.size());
   RestBlades rest;
+  std::vector<sim::TriMesh> earlier = object.recent_blades;  // what a blade may snap to
+  sim::Box3 region{sim::Vec3::Zero(), sim::Vec3::Zero()};      // m
+  if (options.min_feature > 0.0 && !object.surface.triangles.empty()) {
+    region = sim::bounds(object.surface);
+    region.min -= sim::Vec3::Constant(options.min_feature);
+    region.max += sim::Vec3::Constant(options.min_feature);
+  }
   for (const std::vector<int>& g : groups) {
     sim::TriMesh b = rest_blade(model, slots, g, request, options, out);
+    if (!object.surface.triangles.empty()) {
+      const int before = out.snapped;
+      snap_blade(earlier, region, options, b, out);
+      if (out.snapped == before) earlier.push_back(b);  // a blade that snapped is among them already
+    }
     rest.foreign.push_back(foreign_leaves(model, BladeVolume(b), g));
     if (!rest.foreign.back().empty()) ++out.restricted_components;
     rest.blades.push_back(std::move(b));
@@ -672,6 +697,7 @@ SurfaceCut surface_stage(SurfaceEditor& editor, const CutObject& object, const s
   cut.unrestricted.assign(rest.blades.size(), 0);
   SurfaceCutOptions sopt;
   sopt.verify = options.verify;
+  sopt.tiny_edge = kTinyEdgeFraction * options.min_feature;
   sopt.check_blade_self_intersection = false;  // blades are checked when loaded (or built convex)
   // S checked once, and changed since only by verified cuts (which check every changed face against its
   // neighbours), stays free of self-intersections: CGAL need not check it again.
@@ -781,6 +807,21 @@ bool only_subfeature(CutObject& object, const RestBlades& rest, const CutOptions
   });
 }
 
+// Keeps the rest-space blades of a cut that changed S for the next cuts to snap to (at most kRecentBlades, the
+// oldest dropped first); one that snapped is there already.
+void remember_blades(CutObject& object, const RestBlades& rest) {
+  if (!(object.surface.triangles.size() > 0)) return;
+  for (const sim::TriMesh& b : rest.blades) {
+    std::vector<sim::TriMesh>& recent = object.recent_blades;
+    const bool known = std::any_of(recent.begin(), recent.end(), [&](const sim::TriMesh& e) {
+      return e.vertices == b.vertices && e.triangles == b.triangles;
+    });
+    if (known) continue;
+    if (recent.size() >= kRecentBlades) recent.erase(recent.begin());
+    recent.push_back(b);
+  }
+}
+
 // How a cut ended when it did not throw.
 struct Verdict {
   std::string status;  ///< "ok" | "no-op"
@@ -793,7 +834,7 @@ Verdict run_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceEmbedd
                 const CutRequest& request, const CutOptions& options, CutOutcome& out) {
   const sim::ObjectModel& model = simulator.model();
   auto t0 = Clock::now();
-  RestBlades rest = back_transform(model, simulator.state(), request, options, out);
+  RestBlades rest = back_transform(object, model, simulator.state(), request, options, out);
   out.ms.back_transform = ms_since(t0);
   if (rest.blades.empty()) return {"no-op", "the blade meets no element"};
   if (only_subfeature(object, rest, options)) {
@@ -829,6 +870,7 @@ Verdict run_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceEmbedd
   out.ms.solver_update = adopt_model(simulator, stages);
   surface.commit();
   object.surface_checked = object.surface_checked && options.verify;
+  remember_blades(object, rest);
   return {"ok", ""};
 }
 

@@ -180,6 +180,13 @@ class Repair {
  public:
   Repair(PieceMesh& mesh, FaceGrid& grid, double tiny_edge) : m_(mesh), grid_(grid), tiny2_(tiny_edge * tiny_edge) {
     for (std::size_t t = 0; t < m_.tris.size(); ++t) {
+      // Where two exact nodes rounded to one point (one node), the rounding collapsed the edge between them: the
+      // pieces along that edge, now with a node twice, vanish as they do in a collapse.
+      const Tri& x = m_.tris[t];
+      if (x[0] == x[1] || x[1] == x[2] || x[0] == x[2]) {
+        m_.alive[t] = 0;
+        ++merged_;
+      }
       if (!m_.alive[t]) continue;
       for (const int32_t n : m_.tris[t]) around_[n].push_back(static_cast<int32_t>(t));
     }
@@ -187,7 +194,7 @@ class Repair {
 
   // Rounds of detection and collapses until nothing is found (the number of collapses), or a defect is left.
   int run() {
-    int collapses = 0;
+    int collapses = merged_;
     for (int round = 0; round < 16; ++round) {
       std::vector<int32_t> bad = detect();
       if (bad.empty()) return collapses;
@@ -264,6 +271,7 @@ class Repair {
   PieceMesh& m_;
   FaceGrid& grid_;
   double tiny2_;  // m^2
+  int merged_ = 0;  // pieces the rounding collapsed (a node twice)
   std::unordered_map<int32_t, std::vector<int32_t>> around_;  // node -> the pieces it was ever in
 };
 

@@ -49,14 +49,18 @@ Nodes number_nodes(const Corefinement& core, const std::vector<int32_t>& patch_v
   nodes.p_node.resize(n_p);
   std::unordered_map<PointKey, int32_t, PointKeyHash> node_at;
   node_at.reserve(n_p);
+  // A new point that rounded onto an earlier one (of either mesh) is that node: the rounding merged them, and the
+  // pieces between them, with a node twice, vanish in the repair (repair_rounding).
   for (std::size_t k = 0; k < n_p; ++k) {
     nodes.p_node[k] = k < p_initial ? patch_vertices[k] : nv + static_cast<int32_t>(k - p_initial);
-    node_at.emplace(PointKey(core.p_points[k]), nodes.p_node[k]);
+    const auto [it, added] = node_at.emplace(PointKey(core.p_points[k]), nodes.p_node[k]);
+    if (!added && k >= p_initial) nodes.p_node[k] = it->second;
   }
   nodes.b_node.resize(core.b_points.size());
   for (std::size_t v = 0; v < core.b_points.size(); ++v) {
-    const auto it = node_at.find(PointKey(core.b_points[v]));
-    nodes.b_node[v] = it != node_at.end() ? it->second : nv + nodes.n_new_p + static_cast<int32_t>(v);
+    const auto [it, added] =
+        node_at.emplace(PointKey(core.b_points[v]), nv + nodes.n_new_p + static_cast<int32_t>(v));
+    nodes.b_node[v] = it->second;
   }
   return nodes;
 }

@@ -256,15 +256,21 @@ RestBlades back_transform(const CutObject& object, const sim::ObjectModel& model
     region.min -= sim::Vec3::Constant(options.min_feature);
     region.max += sim::Vec3::Constant(options.min_feature);
   }
+  const std::size_t recent = earlier.size();
   for (const std::vector<int>& g : groups) {
     sim::TriMesh b = rest_blade(model, slots, g, request, options, out);
+    std::vector<char> foreign = foreign_leaves(model, BladeVolume(b), g);
     if (!object.surface.triangles.empty()) {
+      // A restricted blade snaps only to the recent cuts' blades: the same blade restricted to two components
+      // would meet, exactly, the walls it has just made in the other.
       const int before = out.snapped;
-      snap_blade(earlier, region, options, b, out);
-      if (out.snapped == before) earlier.push_back(b);  // a blade that snapped is among them already
+      snap_blade(foreign.empty() ? earlier : std::vector<sim::TriMesh>(earlier.begin(), earlier.begin() + recent),
+                 region, options, b, out);
+      if (out.snapped != before) foreign = foreign_leaves(model, BladeVolume(b), g);
+      else if (foreign.empty()) earlier.push_back(b);  // a blade that snapped is among them already
     }
-    rest.foreign.push_back(foreign_leaves(model, BladeVolume(b), g));
-    if (!rest.foreign.back().empty()) ++out.restricted_components;
+    if (!foreign.empty()) ++out.restricted_components;
+    rest.foreign.push_back(std::move(foreign));
     rest.blades.push_back(std::move(b));
   }
   return rest;
@@ -690,6 +696,19 @@ SurfaceEditResult cut_with_blade(SurfaceEditor& editor, const sim::ObjectModel& 
   return std::move(r);
 }
 
+// Whether rest blade k, unrestricted, is the same as an earlier blade of this cut that cut unrestricted (both
+// snapped to one, snap_blade): S \ B \ B = S \ B, and the second boolean would only meet the walls the first made.
+bool repeats_unrestricted(const RestBlades& rest, const SurfaceCut& cut, std::size_t k) {
+  if (!rest.foreign[k].empty()) return false;
+  const sim::TriMesh& b = rest.blades[k];
+  for (std::size_t j = 0; j < k; ++j) {
+    const sim::TriMesh& e = rest.blades[j];
+    if ((rest.foreign[j].empty() || cut.unrestricted[j]) && e.vertices == b.vertices && e.triangles == b.triangles)
+      return true;
+  }
+  return false;
+}
+
 // Stage 2: S <- S \ B'_i for each rest blade in turn, in place (the editor journals the edits).
 SurfaceCut surface_stage(SurfaceEditor& editor, const CutObject& object, const sim::ObjectModel& model,
                          RestBlades& rest, const CutOptions& options, CutOutcome& out) {
@@ -704,6 +723,7 @@ SurfaceCut surface_stage(SurfaceEditor& editor, const CutObject& object, const s
   sopt.check_surface_self_intersection = !object.surface_checked;
   for (std::size_t k = 0; k < rest.blades.size(); ++k) {
     if (editor.mesh().triangles.empty()) break;
+    if (repeats_unrestricted(rest, cut, k)) continue;
     const SurfaceEditResult r = cut_with_blade(editor, model, rest, k, sopt, cut, out);
     if (r.status == SurfaceCutStatus::no_op) continue;
     out.removed_volume += r.removed_volume;

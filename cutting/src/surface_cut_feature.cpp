@@ -195,16 +195,18 @@ ConvexSolid convex_solid(const sim::TriMesh& blade, double tol) {
   return c;
 }
 
-// The distance (m) from q to the convex solid `c` (0 inside): the closest point lies on a triangle whose plane q is
-// outside of, so only those are measured.
+// The distance (m) from q to the convex solid `c` (0 inside, where no triangle's plane has q outside): the closest
+// point lies on a triangle whose plane q is outside of, so only those are measured.
 double distance_to_convex(const Vec3& q, const ConvexSolid& c) {
-  if (std::all_of(c.planes.begin(), c.planes.end(), [&](const Plane& p) { return p.n.dot(q) <= p.d; })) return 0.0;
-  double best = std::numeric_limits<double>::infinity();
+  double best = 0.0;  // inside (or on the boundary up to rounding) unless some triangle's plane has q outside
+  bool outside = false;
   const sim::TriMesh& m = *c.mesh;
   for (std::size_t f = 0; f < m.triangles.size(); ++f) {
     const Plane& p = c.triangle_planes[f];
     if (!(p.n.dot(q) > p.d)) continue;  // q is not outside this triangle's plane
     const Tri& t = m.triangles[f];
+    if (!outside) best = std::numeric_limits<double>::infinity();
+    outside = true;
     best = std::min(best, point_triangle_distance(q, m.vertices[static_cast<std::size_t>(t[0])],
                                                   m.vertices[static_cast<std::size_t>(t[1])],
                                                   m.vertices[static_cast<std::size_t>(t[2])]));

@@ -251,7 +251,8 @@ RestBlades back_transform(const CutObject& object, const sim::ObjectModel& model
   RestBlades rest;
   std::vector<sim::TriMesh> earlier = object.recent_blades;  // what a blade may snap to
   sim::Box3 region{sim::Vec3::Zero(), sim::Vec3::Zero()};      // m
-  if (options.min_feature > 0.0 && !object.surface.triangles.empty()) {
+  // S's bounds (a pass over S) only when a blade may snap: after earlier cuts, or with several components.
+  if (options.min_feature > 0.0 && !object.surface.triangles.empty() && (!earlier.empty() || groups.size() > 1)) {
     region = sim::bounds(object.surface);
     region.min -= sim::Vec3::Constant(options.min_feature);
     region.max += sim::Vec3::Constant(options.min_feature);

@@ -223,11 +223,24 @@ sim::TriMesh rest_blade(const sim::ObjectModel& model, const std::vector<sim::Ve
   return blade;
 }
 
+// Near-coincident walls snap together: a rest-space blade within options.min_feature of a recent cut's blade or of
+// another component's blade of this cut (`earlier`), where S's material can be (`region`: S's bounds grown by
+// min_feature), becomes that blade exactly (snap_target), so that its walls coincide with the walls that blade left
+// or leaves instead of landing micrometres beside them.
+void snap_blade(const std::vector<sim::TriMesh>& earlier, const sim::Box3& region, const CutOptions& options,
+                sim::TriMesh& blade, CutOutcome& out) {
+  if (!(options.min_feature > 0.0) || earlier.empty()) return;
+  const int k = snap_target(blade, earlier, region, options.min_feature);
+  if (k < 0) return;
+  blade = earlier[std::size_t(k)];
+  ++out.snapped;
+}
+
 // Stage 1: the leaves whose deformed hexahedra meet the blade, grouped into face- and material-connected
 // components; per component a shape-matching affine map takes the blade into rest space (B'_i), restricted to the
 // component's material (foreign_leaves). No blade when the blade meets no element. Throws StageFailure.
-RestBlades back_transform(const sim::ObjectModel& model, const sim::SimState& state, const CutRequest& request,
-                          const CutOptions& options, CutOutcome& out) {
+RestBlades back_transform(const CutObject& object, const sim::ObjectModel& model, const sim::SimState& state,
+                          const CutRequest& request, const CutOptions& options, CutOutcome& out) {
   const BladeVolume blade(request.blade);
   std::vector<sim::Vec3> slots;
   model.dofs().prolong(state.x, slots);
@@ -236,10 +249,29 @@ RestBlades back_transform(const sim::ObjectModel& model, const sim::SimState& st
   const std::vector<std::vector<int>> groups = touched_components(model, touched);
   out.components = int(groups.size());
   RestBlades rest;
+  std::vector<sim::TriMesh> earlier = object.recent_blades;  // what a blade may snap to
+  sim::Box3 region{sim::Vec3::Zero(), sim::Vec3::Zero()};      // m
+  // S's bounds (a pass over S) only when a blade may snap: after earlier cuts, or with several components.
+  if (options.min_feature > 0.0 && !object.surface.triangles.empty() && (!earlier.empty() || groups.size() > 1)) {
+    region = sim::bounds(object.surface);
+    region.min -= sim::Vec3::Constant(options.min_feature);
+    region.max += sim::Vec3::Constant(options.min_feature);
+  }
+  const std::size_t recent = earlier.size();
   for (const std::vector<int>& g : groups) {
     sim::TriMesh b = rest_blade(model, slots, g, request, options, out);
-    rest.foreign.push_back(foreign_leaves(model, BladeVolume(b), g));
-    if (!rest.foreign.back().empty()) ++out.restricted_components;
+    std::vector<char> foreign = foreign_leaves(model, BladeVolume(b), g);
+    if (!object.surface.triangles.empty()) {
+      // A restricted blade snaps only to the recent cuts' blades: the same blade restricted to two components
+      // would meet, exactly, the walls it has just made in the other.
+      const int before = out.snapped;
+      snap_blade(foreign.empty() ? earlier : std::vector<sim::TriMesh>(earlier.begin(), earlier.begin() + recent),
+                 region, options, b, out);
+      if (out.snapped != before) foreign = foreign_leaves(model, BladeVolume(b), g);
+      else if (foreign.empty()) earlier.push_back(b);  // a blade that snapped is among them already
+    }
+    if (!foreign.empty()) ++out.restricted_components;
+    rest.foreign.push_back(std::move(foreign));
     rest.blades.push_back(std::move(b));
   }
   return rest;
@@ -665,6 +697,19 @@ SurfaceEditResult cut_with_blade(SurfaceEditor& editor, const sim::ObjectModel& 
   return std::move(r);
 }
 
+// Whether rest blade k, unrestricted, is the same as an earlier blade of this cut that cut unrestricted (both
+// snapped to one, snap_blade): S \ B \ B = S \ B, and the second boolean would only meet the walls the first made.
+bool repeats_unrestricted(const RestBlades& rest, const SurfaceCut& cut, std::size_t k) {
+  if (!rest.foreign[k].empty()) return false;
+  const sim::TriMesh& b = rest.blades[k];
+  for (std::size_t j = 0; j < k; ++j) {
+    const sim::TriMesh& e = rest.blades[j];
+    if ((rest.foreign[j].empty() || cut.unrestricted[j]) && e.vertices == b.vertices && e.triangles == b.triangles)
+      return true;
+  }
+  return false;
+}
+
 // Stage 2: S <- S \ B'_i for each rest blade in turn, in place (the editor journals the edits).
 SurfaceCut surface_stage(SurfaceEditor& editor, const CutObject& object, const sim::ObjectModel& model,
                          RestBlades& rest, const CutOptions& options, CutOutcome& out) {
@@ -672,12 +717,14 @@ SurfaceCut surface_stage(SurfaceEditor& editor, const CutObject& object, const s
   cut.unrestricted.assign(rest.blades.size(), 0);
   SurfaceCutOptions sopt;
   sopt.verify = options.verify;
+  sopt.tiny_edge = kTinyEdgeFraction * options.min_feature;
   sopt.check_blade_self_intersection = false;  // blades are checked when loaded (or built convex)
   // S checked once, and changed since only by verified cuts (which check every changed face against its
   // neighbours), stays free of self-intersections: CGAL need not check it again.
   sopt.check_surface_self_intersection = !object.surface_checked;
   for (std::size_t k = 0; k < rest.blades.size(); ++k) {
     if (editor.mesh().triangles.empty()) break;
+    if (repeats_unrestricted(rest, cut, k)) continue;
     const SurfaceEditResult r = cut_with_blade(editor, model, rest, k, sopt, cut, out);
     if (r.status == SurfaceCutStatus::no_op) continue;
     out.removed_volume += r.removed_volume;
@@ -781,6 +828,21 @@ bool only_subfeature(CutObject& object, const RestBlades& rest, const CutOptions
   });
 }
 
+// Keeps the rest-space blades of a cut that changed S for the next cuts to snap to (at most kRecentBlades, the
+// oldest dropped first); one that snapped is there already.
+void remember_blades(CutObject& object, const RestBlades& rest) {
+  if (!(object.surface.triangles.size() > 0)) return;
+  for (const sim::TriMesh& b : rest.blades) {
+    std::vector<sim::TriMesh>& recent = object.recent_blades;
+    const bool known = std::any_of(recent.begin(), recent.end(), [&](const sim::TriMesh& e) {
+      return e.vertices == b.vertices && e.triangles == b.triangles;
+    });
+    if (known) continue;
+    if (recent.size() >= kRecentBlades) recent.erase(recent.begin());
+    recent.push_back(b);
+  }
+}
+
 // How a cut ended when it did not throw.
 struct Verdict {
   std::string status;  ///< "ok" | "no-op"
@@ -793,7 +855,7 @@ Verdict run_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceEmbedd
                 const CutRequest& request, const CutOptions& options, CutOutcome& out) {
   const sim::ObjectModel& model = simulator.model();
   auto t0 = Clock::now();
-  RestBlades rest = back_transform(model, simulator.state(), request, options, out);
+  RestBlades rest = back_transform(object, model, simulator.state(), request, options, out);
   out.ms.back_transform = ms_since(t0);
   if (rest.blades.empty()) return {"no-op", "the blade meets no element"};
   if (only_subfeature(object, rest, options)) {
@@ -829,6 +891,7 @@ Verdict run_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceEmbedd
   out.ms.solver_update = adopt_model(simulator, stages);
   surface.commit();
   object.surface_checked = object.surface_checked && options.verify;
+  remember_blades(object, rest);
   return {"ok", ""};
 }
 

@@ -114,7 +114,8 @@ void cut(SurfaceEditor& editor, const sim::TriMesh& blade, const SurfaceCutOptio
 
   const ChangingFaces changing = changing_faces(surface, std::move(patch), std::move(gone));
   const WrittenPatch written =
-      write_back(editor, changing, core, blade.vertices.size(), g.centre, options.verify, result);
+      write_back(editor, changing, core, blade.vertices.size(), g.centre, options.verify, options.verify,
+                 options.tiny_edge, result);
   if (options.verify) verify_result(editor.mesh(), grid, written, changing.arcs, nv);
   new_triangle_quality(editor.mesh(), written, result);
   result.status = SurfaceCutStatus::ok;
@@ -219,6 +220,7 @@ SurfaceCutResult cut_surface(const sim::TriMesh& surface, const sim::TriMesh& bl
   result.new_triangles = e.new_triangles;
   result.min_angle_deg = e.min_angle_deg;
   result.min_edge = e.min_edge;
+  result.collapses = e.collapses;
   if (e.status == SurfaceCutStatus::no_op) {
     result.mesh = surface;
     result.triangle_origin = std::move(origin);

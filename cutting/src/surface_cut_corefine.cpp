@@ -393,6 +393,7 @@ Side blade_region_side(const Mesh& b, const std::vector<FI>& faces, FI rep, cons
 
 // Whether each region of the blade is kept (b_regions): by its votes (`b_vote`); without votes, discarded when it
 // lies on P (every face centroid within eps, eps2 = eps^2 in m^2), else kept when inside S and removable there.
+// Conflicting votes count as none.
 std::vector<char> classify_blade_regions(const Meshes& m, const std::vector<int>& b_vote, const sim::TriMesh& surface,
                                          FaceGrid& grid, double eps2, const SurfaceCutOptions& options) {
   std::vector<char> b_keep(static_cast<std::size_t>(m.b_regions), 0);
@@ -401,9 +402,11 @@ std::vector<char> classify_blade_regions(const Meshes& m, const std::vector<int>
   const bool patch_empty = m.p.number_of_faces() == 0;
   std::optional<FaceTree> p_tree;  // built at the first region without votes
   for (int r = 0; r < m.b_regions; ++r) {
+    // Conflicting votes (the rounding of the intersection points can pair a constrained edge with the wrong
+    // blade halfedge, or tip a sliver region of P to the wrong side) are decided like no votes, by the region's own
+    // exact ray test; a result that then does not close up fails the verification.
     const int v = b_vote[static_cast<std::size_t>(r)];
-    if (v == 2) throw CutFailure{"blade region " + std::to_string(r) + " is both inside and outside the surface"};
-    if (v != 0) {
+    if (v == 1 || v == -1) {
       b_keep[static_cast<std::size_t>(r)] = v > 0 ? 1 : 0;
       continue;
     }

@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "octocut/cutting/surface_cut.hpp"
@@ -108,6 +109,147 @@ bool removes_only_subfeature(const sim::TriMesh& surface, FaceGrid& grid, const 
     }
   }
   return surface_cut_detail::point_in_solid(surface, grid, centre) == 0;
+}
+
+namespace {
+
+// The corners of the convex body blade ∩ box (m): the corners of the blade's triangles clipped to the box
+// (Sutherland-Hodgman), which include the blade's vertices in the box and the points where its edges cross the box's
+// faces and its faces cross the box's edges, and the box's corners inside the blade (`planes`).
+std::vector<Vec3> corners_in_box(const sim::TriMesh& blade, const std::vector<Plane>& planes, const sim::Box3& box) {
+  std::vector<Vec3> corners, poly, next;
+  for (const Tri& t : blade.triangles) {
+    poly = {blade.vertices[static_cast<std::size_t>(t[0])], blade.vertices[static_cast<std::size_t>(t[1])],
+            blade.vertices[static_cast<std::size_t>(t[2])]};
+    for (int axis = 0; axis < 3 && !poly.empty(); ++axis) {
+      for (const int side : {-1, 1}) {
+        const double bound = side < 0 ? box.min[axis] : box.max[axis];
+        next.clear();
+        for (std::size_t i = 0; i < poly.size(); ++i) {
+          const Vec3& u = poly[i];
+          const Vec3& v = poly[(i + 1) % poly.size()];
+          const double su = side * (u[axis] - bound), sv = side * (v[axis] - bound);  // <= 0 inside, m
+          if (su <= 0.0) next.push_back(u);
+          if ((su < 0.0 && sv > 0.0) || (su > 0.0 && sv < 0.0)) next.push_back(u + (su / (su - sv)) * (v - u));
+        }
+        poly.swap(next);
+        if (poly.empty()) break;
+      }
+    }
+    corners.insert(corners.end(), poly.begin(), poly.end());
+  }
+  for (int c = 0; c < 8; ++c) {
+    const Vec3 q((c & 1) ? box.max.x() : box.min.x(), (c & 2) ? box.max.y() : box.min.y(),
+                 (c & 4) ? box.max.z() : box.min.z());
+    if (std::all_of(planes.begin(), planes.end(), [&](const Plane& p) { return p.n.dot(q) <= p.d; })) {
+      corners.push_back(q);
+    }
+  }
+  return corners;
+}
+
+// The distance (m) from q to triangle abc (m): the closest point by the regions of the triangle (Ericson, Real-Time
+// Collision Detection, 5.1.5).
+double point_triangle_distance(const Vec3& q, const Vec3& a, const Vec3& b, const Vec3& c) {
+  const Vec3 ab = b - a, ac = c - a, ap = q - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0.0 && d2 <= 0.0) return ap.norm();
+  const Vec3 bp = q - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0.0 && d4 <= d3) return bp.norm();
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) return (q - (a + (d1 / (d1 - d3)) * ab)).norm();
+  const Vec3 cp = q - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0.0 && d5 <= d6) return cp.norm();
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) return (q - (a + (d2 / (d2 - d6)) * ac)).norm();
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0) {
+    return (q - (b + ((d4 - d3) / ((d4 - d3) + (d5 - d6))) * (c - b))).norm();
+  }
+  const double denom = 1.0 / (va + vb + vc);
+  return (q - (a + ab * (vb * denom) + ac * (vc * denom))).norm();
+}
+
+// A convex blade as the snapping measures it: its distinct face planes and each triangle's plane (n . x <= d inside).
+struct ConvexSolid {
+  const sim::TriMesh* mesh = nullptr;
+  std::vector<Plane> planes;           // distinct, unit normals
+  std::vector<Plane> triangle_planes;  // (|F|) unnormalised normals
+};
+
+ConvexSolid convex_solid(const sim::TriMesh& blade, double tol) {
+  ConvexSolid c;
+  c.mesh = &blade;
+  if (sim::signed_volume(blade) <= 0.0) return c;
+  c.planes = convex_planes(blade, tol);
+  if (c.planes.empty()) return c;
+  c.triangle_planes.reserve(blade.triangles.size());
+  for (const Tri& t : blade.triangles) {
+    const Vec3& a = blade.vertices[static_cast<std::size_t>(t[0])];
+    const Vec3 n = (blade.vertices[static_cast<std::size_t>(t[1])] - a)
+                       .cross(blade.vertices[static_cast<std::size_t>(t[2])] - a);
+    c.triangle_planes.push_back({n, n.dot(a)});
+  }
+  return c;
+}
+
+// The distance (m) from q to the convex solid `c` (0 inside, where no triangle's plane has q outside): the closest
+// point lies on a triangle whose plane q is outside of, so only those are measured.
+double distance_to_convex(const Vec3& q, const ConvexSolid& c) {
+  double best = 0.0;  // inside (or on the boundary up to rounding) unless some triangle's plane has q outside
+  bool outside = false;
+  const sim::TriMesh& m = *c.mesh;
+  for (std::size_t f = 0; f < m.triangles.size(); ++f) {
+    const Plane& p = c.triangle_planes[f];
+    if (!(p.n.dot(q) > p.d)) continue;  // q is not outside this triangle's plane
+    const Tri& t = m.triangles[f];
+    if (!outside) best = std::numeric_limits<double>::infinity();
+    outside = true;
+    best = std::min(best, point_triangle_distance(q, m.vertices[static_cast<std::size_t>(t[0])],
+                                                  m.vertices[static_cast<std::size_t>(t[1])],
+                                                  m.vertices[static_cast<std::size_t>(t[2])]));
+  }
+  return best;
+}
+
+// Whether every corner of `corners` lies within `limit` (m) of the convex solid `c`; the largest distance into `d`.
+bool within(const std::vector<Vec3>& corners, const ConvexSolid& c, double limit, double& d) {
+  for (const Vec3& q : corners) {
+    d = std::max(d, distance_to_convex(q, c));
+    if (!(d < limit)) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+int snap_target(const sim::TriMesh& blade, const std::vector<sim::TriMesh>& earlier, const sim::Box3& region,
+                double min_feature, double* distance) {
+  if (distance != nullptr) *distance = std::numeric_limits<double>::infinity();
+  if (!(min_feature > 0.0) || blade.triangles.empty()) return -1;
+  const sim::Box3 bb = sim::bounds(blade);
+  const double tol = 1e-9 * (bb.max - bb.min).norm();  // m: flatness of the blade's faces, convexity
+  const ConvexSolid solid = convex_solid(blade, tol);
+  if (solid.planes.empty()) return -1;
+  const std::vector<Vec3> corners = corners_in_box(blade, solid.planes, region);
+  if (corners.empty()) return -1;  // the blade does not reach into the region
+  // The latest candidate within min_feature wins. The distance is the Hausdorff distance of the two solids within
+  // the region: the distance to a convex solid is a convex function, so its largest value over a convex body
+  // (blade ∩ region) is taken at one of its corners.
+  for (std::size_t k = earlier.size(); k-- > 0;) {
+    const sim::TriMesh& e = earlier[k];
+    if (e.vertices.size() != blade.vertices.size() || e.triangles != blade.triangles) continue;
+    const ConvexSolid other = convex_solid(e, tol);
+    if (other.planes.empty()) continue;
+    double d = 0.0;  // m
+    if (!within(corners, other, min_feature, d)) continue;
+    if (!within(corners_in_box(e, other.planes, region), solid, min_feature, d)) continue;
+    if (distance != nullptr) *distance = d;
+    return static_cast<int>(k);
+  }
+  return -1;
 }
 
 }  // namespace octocut::cutting

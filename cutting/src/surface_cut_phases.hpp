@@ -178,9 +178,41 @@ struct WrittenPatch {
 /// `changing.faces` in order, the rest are appended or the leftover slots removed. Sets result.removed_vertices,
 /// result.blade_triangles_kept and result.removed_volume (m^3, over the changed faces, relative to `centre` (m)).
 /// `blade_input_vertices` is the blade's |V| before corefinement.
+/// With `repair`, the pieces first go through phase 3a (repair_rounding with `tiny_edge`, m; result.collapses counts
+/// its collapses), so that V(S) - V(S') is the volume of what is written.
 WrittenPatch write_back(SurfaceEditor& editor, const ChangingFaces& changing, const Corefinement& core,
-                        std::size_t blade_input_vertices, const sim::Vec3& centre, bool boundary_edges,
-                        SurfaceEditResult& result);
+                        std::size_t blade_input_vertices, const sim::Vec3& centre, bool boundary_edges, bool repair,
+                        double tiny_edge, SurfaceEditResult& result);
+
+// ---- Phase 3a: the rounding repair (surface_cut_verify.cpp, CGAL predicates) ----
+
+/// The kept pieces before they are written, as the repair edits them: triangles over nodes, where a node below `nv`
+/// is the vertex of S with that index and a node from nv on is new (new_points[node - nv]).
+struct PieceMesh {
+  const sim::TriMesh* surface = nullptr;  ///< S before the cut
+  int32_t nv = 0;                         ///< |V| of S
+  std::vector<sim::Vec3> new_points;      ///< m, the new nodes' positions (rounded from their exact values)
+  std::vector<char> constructed;          ///< per new node: 1 for an intersection point (rounded), 0 for a blade vertex
+  std::vector<Tri> tris;                  ///< the pieces (node ids); a collapse rewrites them
+  std::vector<char> alive;                ///< (|tris|) 0 for a piece a collapse removed
+  std::vector<char> whole;                ///< (|tris|) 1 for a face of S kept whole (never edited)
+  const std::vector<int32_t>* changing = nullptr;  ///< ChangingFaces::faces (ascending): faces of S the pieces replace
+  const FanCounts* arcs = nullptr;                 ///< ChangingFaces::arcs: the vertices of S on their boundary
+
+  [[nodiscard]] const sim::Vec3& point(int32_t n) const {
+    return n < nv ? surface->vertices[static_cast<std::size_t>(n)] : new_points[static_cast<std::size_t>(n - nv)];
+  }
+};
+
+/// Phase 3a: the exact result rounded to doubles, made valid again where the rounding broke it. Pieces that the
+/// rounding made degenerate (three exactly collinear corners), that intersect another piece or an unchanged
+/// neighbour of S (exact predicates on the rounded coordinates), or that have an edge shorter than `tiny_edge` (m) at a
+/// new node, are repaired by collapsing a new node along one of their edges onto its other end, shortest edge first.
+/// A collapse is made only when it keeps the pieces closed and manifold (the link condition, S's unchanged faces
+/// around the target included), makes no piece degenerate or turns none over, and makes no piece intersect any other
+/// or an unchanged neighbour (exact tests). Rounds until nothing is found; returns the number of collapses. Throws
+/// CutFailure when a defect is left that no collapse can mend. `grid` is S's grid (S not yet edited).
+int repair_rounding(PieceMesh& mesh, FaceGrid& grid, double tiny_edge);
 
 // ---- Phase 4: verification (surface_cut_verify.cpp, CGAL predicates) ----
 

@@ -10,6 +10,9 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <iterator>
+#include <limits>
+#include <unordered_map>
 #include <string>
 #include <utility>
 #include <vector>
@@ -128,10 +131,10 @@ void check_vertex_fans(const sim::TriMesh& out, const std::vector<int32_t>& chan
   }
 }
 
-// Whether two triangles of the output mesh intersect other than in a shared vertex or a shared edge (the rules of
-// PMP::self_intersections, on vertex indices).
-bool triangles_intersect(const sim::TriMesh& m, const Tri& s, const Tri& t) {
-  const auto P = [&](int32_t i) { return to_point(m.vertices[static_cast<std::size_t>(i)]); };
+// Whether two triangles intersect other than in a shared vertex or a shared edge (the rules of
+// PMP::self_intersections, on vertex ids; P(id) gives a vertex's point).
+template <class Pos>
+bool ids_intersect(const Pos& P, const Tri& s, const Tri& t) {
   int shared = 0;
   std::array<int, 2> si{}, ti{};
   for (int i = 0; i < 3; ++i) {
@@ -164,6 +167,265 @@ bool triangles_intersect(const sim::TriMesh& m, const Tri& s, const Tri& t) {
   }
   return CGAL::do_intersect(ts, tt);
 }
+
+// Whether two triangles of the output mesh intersect other than in a shared vertex or a shared edge.
+bool triangles_intersect(const sim::TriMesh& m, const Tri& s, const Tri& t) {
+  return ids_intersect([&](int32_t i) { return to_point(m.vertices[static_cast<std::size_t>(i)]); }, s, t);
+}
+
+// ---- Phase 3a: the rounding repair ----
+
+// The state of repair_rounding: the pieces, which pieces each node is in, and S's faces near a box.
+class Repair {
+ public:
+  Repair(PieceMesh& mesh, FaceGrid& grid, double tiny_edge) : m_(mesh), grid_(grid), tiny2_(tiny_edge * tiny_edge) {
+    for (std::size_t t = 0; t < m_.tris.size(); ++t) {
+      // Where two exact nodes rounded to one point (one node), the rounding collapsed the edge between them: the
+      // pieces along that edge, now with a node twice, vanish as they do in a collapse.
+      const Tri& x = m_.tris[t];
+      if (x[0] == x[1] || x[1] == x[2] || x[0] == x[2]) {
+        m_.alive[t] = 0;
+        ++merged_;
+      }
+      if (!m_.alive[t]) continue;
+      for (const int32_t n : m_.tris[t]) around_[n].push_back(static_cast<int32_t>(t));
+    }
+  }
+
+  // Rounds of detection and collapses until nothing is found (the number of collapses), or a defect is left.
+  int run() {
+    int collapses = merged_;
+    for (int round = 0; round < 16; ++round) {
+      std::vector<int32_t> bad = detect();
+      if (bad.empty()) return collapses;
+      int made = 0;
+      for (const int32_t t : bad) {
+        if (m_.alive[static_cast<std::size_t>(t)] && is_bad(t) && mend(t)) ++made;
+      }
+      if (made == 0) {
+        // Tiny edges that no collapse can take are left; a defect is not.
+        for (const int32_t t : bad) {
+          if (m_.alive[static_cast<std::size_t>(t)] && (degenerate(tri(t)) || intersects_any(tri(t), {t}))) {
+            throw CutFailure{"result piece " + std::to_string(t) +
+                             " is degenerate or intersects another after rounding, and no collapse mends it"};
+          }
+        }
+        return collapses;
+      }
+      collapses += made;
+    }
+    throw CutFailure{"the rounding repair did not converge"};
+  }
+
+ private:
+  Point P(int32_t n) const { return to_point(m_.point(n)); }
+  bool is_new(int32_t n) const { return n >= m_.nv; }
+  bool changing(int32_t f) const { return std::binary_search(m_.changing->begin(), m_.changing->end(), f); }
+  const Tri& tri(int32_t t) const { return m_.tris[static_cast<std::size_t>(t)]; }
+
+  std::array<Vec3, 2> box_of(const Tri& t) const {
+    const Vec3 &a = m_.point(t[0]), &b = m_.point(t[1]), &c = m_.point(t[2]);
+    return {a.cwiseMin(b).cwiseMin(c), a.cwiseMax(b).cwiseMax(c)};
+  }
+  static bool overlap(const std::array<Vec3, 2>& x, const std::array<Vec3, 2>& y) {
+    return (x[0].array() <= y[1].array()).all() && (y[0].array() <= x[1].array()).all();
+  }
+
+  bool degenerate(const Tri& t) const {
+    return t[0] == t[1] || t[1] == t[2] || t[0] == t[2] || CGAL::collinear(P(t[0]), P(t[1]), P(t[2]));
+  }
+  // An edge at a new node shorter than the tiny edge.
+  bool tiny(const Tri& t) const {
+    for (int k = 0; k < 3; ++k) {
+      const int32_t a = t[k], b = t[(k + 1) % 3];
+      if ((is_new(a) || is_new(b)) && (m_.point(a) - m_.point(b)).squaredNorm() < tiny2_) return true;
+    }
+    return false;
+  }
+  // Whether triangle `t` (node ids, not necessarily a piece) intersects a live piece other than those of `skip`, or a
+  // face of S that the pieces do not replace.
+  bool intersects_any(const Tri& t, const std::vector<int32_t>& skip) const {
+    const auto box = box_of(t);
+    const auto pos = [&](int32_t n) { return P(n); };
+    for (std::size_t u = 0; u < m_.tris.size(); ++u) {
+      if (!m_.alive[u] || std::find(skip.begin(), skip.end(), static_cast<int32_t>(u)) != skip.end()) continue;
+      if (overlap(box, box_of(m_.tris[u])) && ids_intersect(pos, t, m_.tris[u])) return true;
+    }
+    for (const int32_t f : grid_.query(*m_.surface, box[0], box[1])) {
+      if (changing(f)) continue;
+      const Tri& g = m_.surface->triangles[static_cast<std::size_t>(f)];
+      if (overlap(box, box_of(g)) && ids_intersect(pos, t, g)) return true;
+    }
+    return false;
+  }
+  bool is_bad(int32_t t) const {
+    const Tri& x = tri(t);
+    return degenerate(x) || tiny(x) || intersects_any(x, {t});
+  }
+
+  std::vector<int32_t> detect() const;
+  std::vector<int32_t> neighbours(int32_t n) const;
+  bool collapse(int32_t u, int32_t w);
+  bool mend(int32_t t);
+
+  PieceMesh& m_;
+  FaceGrid& grid_;
+  double tiny2_;  // m^2
+  int merged_ = 0;  // pieces the rounding collapsed (a node twice)
+  std::unordered_map<int32_t, std::vector<int32_t>> around_;  // node -> the pieces it was ever in
+};
+
+// The live pieces with a new node that are degenerate, have a tiny edge or intersect a piece or a face of S (boxes
+// first, then exact tests), ascending.
+std::vector<int32_t> Repair::detect() const {
+  using Box = CGAL::Box_intersection_d::Box_with_info_d<double, 3, int32_t>;
+  std::vector<char> bad(m_.tris.size(), 0);
+  std::vector<Box> suspects, all;
+  Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  const auto make = [&](const Tri& t, int32_t info) {
+    const auto b = box_of(t);
+    double l[3] = {b[0].x(), b[0].y(), b[0].z()}, h[3] = {b[1].x(), b[1].y(), b[1].z()};
+    return Box(l, h, info);
+  };
+  for (std::size_t t = 0; t < m_.tris.size(); ++t) {
+    if (!m_.alive[t]) continue;
+    const Tri& x = m_.tris[t];
+    // info: 2 t + 1 for a piece, 2 f for a face of S.
+    all.push_back(make(x, static_cast<int32_t>(2 * t + 1)));
+    if (m_.whole[t] || std::none_of(x.begin(), x.end(), [&](int32_t n) { return is_new(n); })) continue;
+    if (degenerate(x) || tiny(x)) bad[t] = 1;
+    suspects.push_back(all.back());
+    const auto b = box_of(x);
+    lo = lo.cwiseMin(b[0]);
+    hi = hi.cwiseMax(b[1]);
+  }
+  if (!suspects.empty()) {
+    for (const int32_t f : grid_.query(*m_.surface, lo, hi)) {
+      if (!changing(f)) all.push_back(make(m_.surface->triangles[static_cast<std::size_t>(f)], 2 * f));
+    }
+    const auto pos = [&](int32_t n) { return P(n); };
+    CGAL::box_intersection_d(suspects.begin(), suspects.end(), all.begin(), all.end(), [&](const Box& x, const Box& y) {
+      if (x.info() == y.info()) return;
+      const auto t = static_cast<std::size_t>(x.info() / 2);
+      const Tri& other = (y.info() & 1) ? m_.tris[static_cast<std::size_t>(y.info() / 2)]
+                                        : m_.surface->triangles[static_cast<std::size_t>(y.info() / 2)];
+      if (ids_intersect(pos, m_.tris[t], other)) {
+        bad[t] = 1;
+        if ((y.info() & 1) && !m_.whole[static_cast<std::size_t>(y.info() / 2)]) bad[static_cast<std::size_t>(y.info() / 2)] = 1;
+      }
+    }, std::ptrdiff_t(2048));
+  }
+  std::vector<int32_t> out;
+  for (std::size_t t = 0; t < bad.size(); ++t) {
+    if (bad[t]) out.push_back(static_cast<int32_t>(t));
+  }
+  return out;
+}
+
+// The nodes that share an edge with node n: through live pieces, and for a vertex of S on the pieces' boundary also
+// through S's faces that stay.
+std::vector<int32_t> Repair::neighbours(int32_t n) const {
+  std::vector<int32_t> out;
+  const auto add = [&](const Tri& t) {
+    for (const int32_t x : t) {
+      if (x != n && (t[0] == n || t[1] == n || t[2] == n)) out.push_back(x);
+    }
+  };
+  if (const auto it = around_.find(n); it != around_.end()) {
+    for (const int32_t t : it->second) {
+      if (m_.alive[static_cast<std::size_t>(t)]) add(tri(t));
+    }
+  }
+  if (!is_new(n) && m_.arcs->count(n) != 0) {
+    for (const int32_t f : grid_.around(*m_.surface, n)) {
+      if (!changing(f)) add(m_.surface->triangles[static_cast<std::size_t>(f)]);
+    }
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+// Collapses new node u onto node w (an edge of a live piece) when that keeps the pieces valid (see repair_rounding);
+// returns whether it did.
+bool Repair::collapse(int32_t u, int32_t w) {
+  std::vector<int32_t> ring, gone, opposite;  // u's live pieces; those with edge uw; their third nodes
+  for (const int32_t t : around_[u]) {
+    if (!m_.alive[static_cast<std::size_t>(t)]) continue;
+    const Tri& x = tri(t);
+    if (x[0] != u && x[1] != u && x[2] != u) continue;
+    ring.push_back(t);
+    if (x[0] == w || x[1] == w || x[2] == w) {
+      gone.push_back(t);
+      for (const int32_t n : x) {
+        if (n != u && n != w) opposite.push_back(n);
+      }
+    }
+  }
+  if (gone.empty() || gone.size() > 2) return false;
+  // The link condition: the nodes adjacent to both are exactly the third nodes of the pieces along uw.
+  const std::vector<int32_t> nu = neighbours(u), nw = neighbours(w);
+  std::vector<int32_t> common;
+  std::set_intersection(nu.begin(), nu.end(), nw.begin(), nw.end(), std::back_inserter(common));
+  std::sort(opposite.begin(), opposite.end());
+  if (common != opposite) return false;
+  // The pieces that move: not degenerate, not turned over, intersecting nothing.
+  std::vector<Tri> moved;
+  std::vector<int32_t> moved_ids;
+  for (const int32_t t : ring) {
+    if (std::find(gone.begin(), gone.end(), t) != gone.end()) continue;
+    Tri x = tri(t);
+    const Vec3 &a0 = m_.point(x[0]), &b0 = m_.point(x[1]), &c0 = m_.point(x[2]);
+    const Vec3 n0 = (b0 - a0).cross(c0 - a0);
+    for (int32_t& n : x) {
+      if (n == u) n = w;
+    }
+    if (degenerate(x)) return false;
+    const Vec3 n1 = (m_.point(x[1]) - m_.point(x[0])).cross(m_.point(x[2]) - m_.point(x[0]));
+    const double scale = std::max({(b0 - a0).squaredNorm(), (c0 - a0).squaredNorm(), (c0 - b0).squaredNorm()});
+    if (n0.norm() > 1e-6 * scale && !(n0.dot(n1) > 0.0)) return false;
+    moved.push_back(x);
+    moved_ids.push_back(t);
+  }
+  std::vector<int32_t> skip = ring;
+  for (std::size_t i = 0; i < moved.size(); ++i) {
+    if (intersects_any(moved[i], skip)) return false;
+    for (std::size_t j = 0; j < i; ++j) {
+      if (ids_intersect([&](int32_t n) { return P(n); }, moved[i], moved[j])) return false;
+    }
+  }
+  for (const int32_t t : gone) m_.alive[static_cast<std::size_t>(t)] = 0;
+  for (std::size_t i = 0; i < moved.size(); ++i) {
+    m_.tris[static_cast<std::size_t>(moved_ids[i])] = moved[i];
+    around_[w].push_back(moved_ids[i]);
+  }
+  return true;
+}
+
+// Tries the collapses along the edges of bad piece t that move a new node, shortest edge first.
+bool Repair::mend(int32_t t) {
+  const Tri x = tri(t);
+  std::vector<std::pair<double, std::array<int32_t, 2>>> tries;  // (squared length, (u, w))
+  for (int k = 0; k < 3; ++k) {
+    const int32_t a = x[k], b = x[(k + 1) % 3];
+    const double l2 = (m_.point(a) - m_.point(b)).squaredNorm();
+    if (is_new(a)) tries.push_back({l2, {a, b}});
+    if (is_new(b)) tries.push_back({l2, {b, a}});
+  }
+  std::sort(tries.begin(), tries.end());
+  for (const auto& [l2, e] : tries) {
+    if (collapse(e[0], e[1])) return true;
+  }
+  return false;
+}
+
+}  // namespace
+
+int repair_rounding(PieceMesh& mesh, FaceGrid& grid, double tiny_edge) {
+  return Repair(mesh, grid, tiny_edge).run();
+}
+
+namespace {
 
 // The unchanged neighbours of the changed faces: faces that are not changed and have a vertex on the patch's
 // boundary (the vertices of `arcs`), ascending. They come from the grid, which follows the edits: a face moved into a

@@ -49,14 +49,18 @@ Nodes number_nodes(const Corefinement& core, const std::vector<int32_t>& patch_v
   nodes.p_node.resize(n_p);
   std::unordered_map<PointKey, int32_t, PointKeyHash> node_at;
   node_at.reserve(n_p);
+  // A new point that rounded onto an earlier one (of either mesh) is that node: the rounding merged them, and the
+  // pieces between them, with a node twice, vanish in the repair (repair_rounding).
   for (std::size_t k = 0; k < n_p; ++k) {
     nodes.p_node[k] = k < p_initial ? patch_vertices[k] : nv + static_cast<int32_t>(k - p_initial);
-    node_at.emplace(PointKey(core.p_points[k]), nodes.p_node[k]);
+    const auto [it, added] = node_at.emplace(PointKey(core.p_points[k]), nodes.p_node[k]);
+    if (!added && k >= p_initial) nodes.p_node[k] = it->second;
   }
   nodes.b_node.resize(core.b_points.size());
   for (std::size_t v = 0; v < core.b_points.size(); ++v) {
-    const auto it = node_at.find(PointKey(core.b_points[v]));
-    nodes.b_node[v] = it != node_at.end() ? it->second : nv + nodes.n_new_p + static_cast<int32_t>(v);
+    const auto [it, added] =
+        node_at.emplace(PointKey(core.b_points[v]), nv + nodes.n_new_p + static_cast<int32_t>(v));
+    nodes.b_node[v] = it->second;
   }
   return nodes;
 }
@@ -89,6 +93,60 @@ Pieces bucket_pieces(const Corefinement& core, const Nodes& nodes, const std::ve
                         nodes.b_node[static_cast<std::size_t>(t[2])]});
   }
   return pieces;
+}
+
+// Phase 3a on the pieces (repair_rounding): flattened, repaired, and bucketed again (the pieces a collapse removed
+// dropped, the order kept). A piece is whole when it is its face of S itself. Returns the number of collapses.
+int repair_pieces(const sim::TriMesh& surface, FaceGrid& grid, const ChangingFaces& changing, const Corefinement& core,
+                  const Nodes& nodes, std::size_t blade_input_vertices, double tiny_edge, Pieces& pieces) {
+  PieceMesh mesh;
+  mesh.surface = &surface;
+  mesh.nv = nodes.nv;
+  mesh.changing = &changing.faces;
+  mesh.arcs = &changing.arcs;
+  const auto n_new_p = static_cast<std::size_t>(nodes.n_new_p);
+  const std::size_t p_initial = core.p_points.size() - n_new_p;
+  for (std::size_t k = 0; k < n_new_p + core.b_points.size(); ++k) {
+    mesh.new_points.push_back(k < n_new_p ? core.p_points[p_initial + k] : core.b_points[k - n_new_p]);
+    mesh.constructed.push_back(k < n_new_p || k - n_new_p >= blade_input_vertices ? 1 : 0);
+  }
+  std::vector<int> owner;  // per piece: its changing face's position, or -1 for the blade's
+  for (std::size_t i = 0; i + 1 < pieces.bucket_begin.size(); ++i) {
+    const int n = pieces.bucket_begin[i + 1] - pieces.bucket_begin[i];
+    for (int k = pieces.bucket_begin[i]; k < pieces.bucket_begin[i + 1]; ++k) {
+      const Tri& t = pieces.p[static_cast<std::size_t>(k)];
+      Tri old = surface.triangles[static_cast<std::size_t>(changing.faces[i])];
+      bool same = false;
+      for (int r = 0; r < 3 && n == 1; ++r) {
+        same = same || (t[0] == old[r] && t[1] == old[(r + 1) % 3] && t[2] == old[(r + 2) % 3]);
+      }
+      mesh.tris.push_back(t);
+      mesh.whole.push_back(same ? 1 : 0);
+      owner.push_back(static_cast<int>(i));
+    }
+  }
+  for (const Tri& t : pieces.b) {
+    mesh.tris.push_back(t);
+    mesh.whole.push_back(0);
+    owner.push_back(-1);
+  }
+  mesh.alive.assign(mesh.tris.size(), 1);
+  const int collapses = repair_rounding(mesh, grid, tiny_edge);
+  if (collapses == 0) return 0;
+  Pieces out;
+  out.bucket_begin.assign(pieces.bucket_begin.size(), 0);
+  for (std::size_t t = 0; t < mesh.tris.size(); ++t) {
+    if (!mesh.alive[t]) continue;
+    if (owner[t] < 0) {
+      out.b.push_back(mesh.tris[t]);
+    } else {
+      out.p.push_back(mesh.tris[t]);
+      ++out.bucket_begin[static_cast<std::size_t>(owner[t]) + 1];
+    }
+  }
+  for (std::size_t i = 1; i < out.bucket_begin.size(); ++i) out.bucket_begin[i] += out.bucket_begin[i - 1];
+  pieces = std::move(out);
+  return collapses;
 }
 
 // Which new nodes a kept piece uses (|n_new_p| + |V_B'|, indexed by node - nv), and into `removed` (ascending) the
@@ -168,12 +226,16 @@ std::vector<int32_t> add_new_vertices(SurfaceEditor& editor, const Corefinement&
 }  // namespace
 
 WrittenPatch write_back(SurfaceEditor& editor, const ChangingFaces& changing, const Corefinement& core,
-                        std::size_t blade_input_vertices, const Vec3& centre, bool boundary_edges,
-                        SurfaceEditResult& result) {
+                        std::size_t blade_input_vertices, const Vec3& centre, bool boundary_edges, bool repair,
+                        double tiny_edge, SurfaceEditResult& result) {
   const sim::TriMesh& surface = editor.mesh();
   const std::vector<int32_t>& faces = changing.faces;
   const Nodes nodes = number_nodes(core, changing.patch_vertices, static_cast<int32_t>(surface.vertices.size()));
-  const Pieces pieces = bucket_pieces(core, nodes, faces);
+  Pieces pieces = bucket_pieces(core, nodes, faces);
+  if (repair) {
+    result.collapses = repair_pieces(surface, editor.grid(), changing, core, nodes, blade_input_vertices, tiny_edge,
+                                     pieces);
+  }
   result.blade_triangles_kept = static_cast<int>(pieces.b.size());
   const std::vector<char> used_new =
       used_new_nodes(surface, changing, nodes, pieces, core.b_points.size(), result.removed_vertices);
@@ -189,7 +251,10 @@ WrittenPatch write_back(SurfaceEditor& editor, const ChangingFaces& changing, co
     old_attributes[i] = editor.attributes(faces[i]);
     if (pieces.bucket_begin[i + 1] - pieces.bucket_begin[i] == 1) {
       const Tri& only = pieces.p[static_cast<std::size_t>(pieces.bucket_begin[i])];
-      whole[i] = only[0] < nodes.nv && only[1] < nodes.nv && only[2] < nodes.nv ? 1 : 0;
+      const Tri& old = old_tris[i];
+      for (int r = 0; r < 3; ++r) {
+        whole[i] = whole[i] || (only[0] == old[r] && only[1] == old[(r + 1) % 3] && only[2] == old[(r + 2) % 3]);
+      }
     }
     if (!whole[i]) volume_before += tet_volume(centre, surface, old_tris[i]);
   }

@@ -20,6 +20,9 @@ int mesh(const std::uint8_t* data, std::size_t size);
 /// that walls land coplanar, coincident, through earlier holes and at vertices and edges) and cut now. After every
 /// cut the state must stay finite and S closed, manifold and oriented; a violation aborts (a finding).
 int cuts(const std::uint8_t* data, std::size_t size);
+/// The cut sequence of `cuts`, returning how many of its cuts were skipped (a skip is no finding for the fuzzer, but
+/// the seed corpus must cut without one: fuzz_regression_test).
+int cut_skips(const std::uint8_t* data, std::size_t size);
 
 /// The target named `name` ("scene", "ply", "mesh", "cuts"); nullptr for another name.
 using Target = int (*)(const std::uint8_t*, std::size_t);

@@ -372,7 +372,12 @@ Entry make_scene_schema() {
               "below the blade's surface (a re-punch landing a few micrometres beside, or exactly on, the wall an "
               "earlier cut left) keeps that shell whole and is a no-op, instead of shaving slivers off the surface. "
               "The removed volume is then exact to within `min_feature` times the area of the blade's surface inside "
-              "the material. Only convex blades at least 2 `min_feature` thick are tested; 0: off.")},
+              "the material. Only convex blades at least 2 `min_feature` thick are tested. A rest-space blade within "
+              "`min_feature` of a recent cut's blade (the same blade mesh; Hausdorff distance of the two convex solids "
+              "inside S's bounds) or of another unrestricted component's blade of the same cut snaps onto it exactly, "
+              "so that near-coincident walls coincide instead of making slivers; the removed volume is that of the "
+              "snapped blade. Edges of a cut's result at new vertices shorter than 1e-3 `min_feature` collapse where "
+              "exact checks allow. 0: off.")},
       "How cuts are carried out.");
 
   Entry expected = make_entry(

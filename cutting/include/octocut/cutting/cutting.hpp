@@ -26,6 +26,10 @@ enum class FragmentPolicy {
 /// re-punch at one spot of a sagging slab lands beside the wall the last one left (docs/RESULTS.md, issue 18).
 inline constexpr double kDefaultMinFeature = 3e-4;
 
+/// The edges at new vertices of a cut's result shorter than this fraction of CutOptions::min_feature collapse where
+/// the exact checks allow (SurfaceCutOptions::tiny_edge): 0.3 um at the default.
+inline constexpr double kTinyEdgeFraction = 1e-3;
+
 struct CutOptions {
   double max_condition = 10.0;                  ///< shape matching: blend towards the rotation above this cond(A)
   FragmentPolicy fragments = FragmentPolicy::all;
@@ -33,7 +37,9 @@ struct CutOptions {
   bool verify = true;                           ///< check S after the boolean (closed, manifold, no self-intersection)
   double min_feature = kDefaultMinFeature;      ///< m; material that a blade would remove only within this depth
                                                 ///< below its surface is a sub-feature shell, kept whole: the cut
-                                                ///< is a no-op (removes_only_subfeature); 0: off
+                                                ///< is a no-op (removes_only_subfeature), and a rest-space blade
+                                                ///< within it of an earlier cut's snaps onto that (snap_target);
+                                                ///< 0: off
 };
 
 /// The FaceGrid of CutObject::surface and the sizes of S it matches. A copy starts empty: the copy's grid is built
@@ -66,7 +72,13 @@ struct CutObject {
   SurfaceGrid grid;  ///< the grid over S's triangles that finds those near a blade; apply_cut keeps it up to date.
                      ///< Call index_surface after setting or changing `surface` yourself (else the next cut builds
                      ///< it, an O(|S|) cost in its surface stage)
+  std::vector<sim::TriMesh> recent_blades;  ///< rest-space blades (m) of the latest cuts that changed S, oldest first
+                                            ///< (at most kRecentBlades): a new rest-space blade within min_feature
+                                            ///< of one of them snaps onto it (snap_target)
 };
+
+/// How many rest-space blades of earlier cuts CutObject::recent_blades keeps.
+inline constexpr std::size_t kRecentBlades = 8;
 
 /// Builds object.grid over object.surface: O(|S|), once after loading S. Throws std::invalid_argument naming the
 /// first non-finite vertex or triangle index out of range.
@@ -101,6 +113,8 @@ struct CutOutcome {
   double fragment_volume = 0.0;       ///< their material volume, m^3
   double max_blend = 0.0;             ///< largest shape-matching blend towards the rotation (0: none)
   int perturbed = 0;                  ///< blades moved by 1e-9 (or 1e-7) of their size to leave a degenerate case
+  int snapped = 0;                    ///< rest-space blades replaced by an earlier cut's within min_feature of them
+                                      ///< (near-coincident walls snap together: snap_target)
   int unrestricted = 0;               ///< of the restricted components, those whose restricted boolean could not be
                                       ///< closed up: their blade cut all the material under it
   int new_triangles = 0;              ///< triangles the surface boolean made (pieces of cut faces and of the blades)

@@ -18,7 +18,10 @@ struct SurfaceCutOptions {
   double margin = 0.0;  ///< growth of the blade's bounding box that selects the patch, m; 0 = automatic (1e-6 times
                         ///< the blade's bounding-box diagonal)
   bool verify = true;   ///< check the result locally (closed, edge- and vertex-manifold, oriented, no degenerate
-                        ///< triangle, no self-intersection among changed faces and their neighbours)
+                        ///< triangle, no self-intersection among changed faces and their neighbours); before that,
+                        ///< repair what rounding the exact result to doubles broke (collapses with exact checks)
+  double tiny_edge = 0.0;  ///< with verify, an edge of the result at a new vertex shorter than this collapses too
+                           ///< where the exact checks allow, m (0: only the rounding's defects are repaired)
   bool check_blade_self_intersection = true;  ///< reject a self-intersecting blade (0.3 ms for 128 triangles);
                                               ///< a caller that checked the blade once may turn this off
   bool check_surface_self_intersection = true;  ///< reject S when its faces near the blade intersect each other
@@ -58,6 +61,7 @@ struct SurfaceCutResult {
   int new_triangles = 0;                     ///< triangles of S' that are not faces of S
   double min_angle_deg = 0.0;                ///< smallest interior angle among them, degrees (0 when none)
   double min_edge = 0.0;                     ///< shortest edge among them, m (0 when none)
+  int collapses = 0;                         ///< edge collapses of the rounding repair (SurfaceCutOptions::verify)
   double ms = 0.0;                           ///< wall time of the call, ms
 };
 
@@ -74,6 +78,7 @@ struct SurfaceEditResult {
   int new_triangles = 0;              ///< triangles of S' that are not faces of S (pieces of cut faces, the blade's)
   double min_angle_deg = 0.0;         ///< smallest interior angle among the new triangles, degrees (0 when none)
   double min_edge = 0.0;              ///< shortest edge among the new triangles, m (0 when none)
+  int collapses = 0;                  ///< edge collapses of the rounding repair (SurfaceCutOptions::verify)
   double ms = 0.0;                    ///< wall time of the call, ms
 };
 
@@ -122,5 +127,16 @@ std::pair<SurfaceCutResult, int> cut_surface_perturbing(const sim::TriMesh& surf
 /// clipping of the faces of S in the blade's bounding box: no exact arithmetic but the one point query.
 bool removes_only_subfeature(const sim::TriMesh& surface, FaceGrid& grid, const sim::TriMesh& blade,
                              double min_feature);
+
+/// The earlier blade that `blade` snaps to (cutting.min_feature: near-coincident walls snap together), or -1: the
+/// latest of `earlier` (rest-space blades of earlier cuts, m) that has the same triangles as `blade` (the same blade
+/// mesh, mapped differently) and lies within `min_feature` (m) of it inside `region` (m; where material can be): the
+/// Hausdorff distance of the two solids clipped to the region is below min_feature. Both must be convex (a
+/// non-convex blade never snaps); the distance to a convex solid is convex, so the largest one over the other
+/// clipped solid is taken at its corners. Replacing the blade by that one moves every wall the cut makes by less than
+/// min_feature, exactly onto the wall the earlier blade left: the boolean then meets coincident faces, not slivers
+/// beside them. `distance` (m), when given, receives the winner's distance (infinity when none).
+int snap_target(const sim::TriMesh& blade, const std::vector<sim::TriMesh>& earlier, const sim::Box3& region,
+                double min_feature, double* distance = nullptr);
 
 }  // namespace octocut::cutting

@@ -387,7 +387,7 @@ struct SceneStepRun {
   std::vector<sim::StepProfile> profile;
   std::vector<std::vector<sim::Vec3>> x;  // DOF positions after each step (steps x num_dofs, m)
   std::vector<sim::Vec3> x0;              // DOF positions at rest (num_dofs, m)
-  long iterations = 0, refactorizations = 0, elements = 0, dofs = 0;
+  long iterations = 0, refactorizations = 0, background = 0, elements = 0, dofs = 0;  // background: refreshes
   std::vector<CutSummary> cuts;
   double sim_time_s = 0.0, wall_ms = 0.0;
 };
@@ -405,6 +405,7 @@ SceneStepRun run_scene_steps(const Scene& scene, bool keep_positions) {
     r.profile.push_back(world.simulator().profile());
     r.iterations += world.simulator().last_solve().iterations;
     r.refactorizations += world.simulator().last_solve().refactorized ? 1 : 0;
+    r.background += world.simulator().last_solve().background ? 1 : 0;
     if (keep_positions) r.x.push_back(world.simulator().state().x);
     r.cuts.insert(r.cuts.end(), step.cuts.begin(), step.cuts.end());
   }
@@ -455,6 +456,7 @@ std::vector<BenchOutput> bench_scene_step(const std::string& name, const std::st
                {"solve_ms", profile_median(run.profile, skip, &sim::StepProfile::solve)},
                {"mean_pcg_iterations", double(run.iterations) / steps},
                {"refactorizations", run.refactorizations},
+               {"background_refreshes", run.background},
                {"realtime_factor", run.wall_ms > 0 ? run.sim_time_s / (run.wall_ms / 1000.0) : 0.0}};
   return {b};
 }

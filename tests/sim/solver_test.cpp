@@ -161,40 +161,48 @@ TEST(LinearSolver, PcgKeepsTheLaggedFactorWhileIterationsStayAtTheBaseline) {
   EXPECT_EQ(refactorizations, 0);
 }
 
-// A matrix that drifts further every solve: the rule buys new factors, and the iterations plus factorisations cost
-// less than keeping the first factor for ever (a factorisation priced at infinity), with every solve accurate.
+// What a pcg solver did over 60 solves of a matrix that drifts further every solve (a growing, non-uniform change:
+// the diagonal of the first half of the unknowns rises), every solve checked for accuracy.
+struct DriftRun {
+  std::vector<VecX> x;  // the solutions
+  int iterations = 0, refactorizations = 0, background = 0, inline_refreshes = 0;
+};
+DriftRun drift_run(const SpMat& A0, LinearSolverOptions o) {
+  o.tolerance = 1e-8;
+  o.max_iterations = 1000;
+  auto s = make_linear_solver("pcg", o);
+  s->analyze_pattern(A0);
+  DriftRun r;
+  for (int k = 0; k < 60; ++k) {
+    SpMat A = A0;
+    for (int i = 0; i < A.rows() / 2; ++i) A.coeffRef(i, i) += 0.2 * k * (1.0 + (i % 7));
+    EXPECT_TRUE(s->factorize(A));
+    const VecX b = VecX::LinSpaced(A.rows(), -1.0, 2.0);
+    VecX x = VecX::Zero(A.rows());
+    const SolveInfo info = s->solve(b, x);
+    EXPECT_TRUE(info.ok);
+    EXPECT_LT((A * x - b).norm(), 1e-7 * b.norm());
+    r.iterations += info.iterations;
+    r.refactorizations += info.refactorized ? 1 : 0;
+    r.background += info.background ? 1 : 0;
+    r.inline_refreshes += info.refactorized && !info.background ? 1 : 0;
+    r.x.push_back(x);
+  }
+  return r;
+}
+
+// The rule buys new factors for a drifting matrix, and the iterations plus factorisations cost less than keeping
+// the first factor for ever (a factorisation priced at infinity), with every solve accurate.
 TEST(LinearSolver, PcgRefreshesTheFactorOfADriftingMatrixAndSavesWork) {
   const SpMat A0 = laplacian(10, 0.05);
-  auto run = [&](double advantage, int& refactorizations) {
-    LinearSolverOptions o;
-    o.tolerance = 1e-8;
-    o.factor_flop_advantage = advantage;
-    o.max_iterations = 1000;
-    auto s = make_linear_solver("pcg", o);
-    s->analyze_pattern(A0);
-    int iterations = 0;
-    refactorizations = 0;
-    for (int k = 0; k < 60; ++k) {
-      SpMat A = A0;
-      // A growing, non-uniform change: the diagonal of the first half of the unknowns rises.
-      for (int i = 0; i < A.rows() / 2; ++i) A.coeffRef(i, i) += 0.2 * k * (1.0 + (i % 7));
-      EXPECT_TRUE(s->factorize(A));
-      const VecX b = VecX::LinSpaced(A.rows(), -1.0, 2.0);
-      VecX x = VecX::Zero(A.rows());
-      const SolveInfo info = s->solve(b, x);
-      EXPECT_TRUE(info.ok);
-      EXPECT_LT((A * x - b).norm(), 1e-7 * b.norm());
-      iterations += info.iterations;
-      refactorizations += info.refactorized ? 1 : 0;
-    }
-    return iterations;
-  };
-  int with_rule = 0, never = 0;
-  const int it_rule = run(1.5, with_rule);
-  const int it_never = run(1e-12, never);
-  EXPECT_LE(never, 1);  // the first factorisation only (inside factorize)
-  EXPECT_GT(with_rule, 0);
-  EXPECT_LT(it_rule, it_never / 2);
+  LinearSolverOptions o;
+  o.factor_flop_advantage = 1.5;
+  const DriftRun rule = drift_run(A0, o);
+  o.factor_flop_advantage = 1e-12;
+  const DriftRun never = drift_run(A0, o);
+  EXPECT_LE(never.refactorizations, 1);  // the first factorisation only (inside factorize)
+  EXPECT_GT(rule.refactorizations, 0);
+  EXPECT_LT(rule.iterations, never.iterations / 2);
 }
 
 // The implicit Euler matrices of a small FEM model whose stiffness term grows solve by solve (a stiffening, moving
@@ -252,41 +260,17 @@ TEST(LinearSolver, PcgSinglePrecisionFactorConvergesLikeTheDoubleOne) {
 }
 
 // The background refresh (factor_lag_solves > 0): the factor is computed on a second thread and put in place a
-// fixed number of solves later. Every solve stays accurate, the refreshes come from the background (no solve
-// factorises inline after the first), the work stays far below never refreshing, and two runs give bit-identical
-// iterates whatever the threads' timing.
+// fixed number of solves later. Every solve stays accurate (drift_run), the refreshes come from the background (no
+// solve factorises inline after the first), the work stays far below never refreshing, and two runs give
+// bit-identical iterates whatever the threads' timing.
 TEST(LinearSolver, PcgBackgroundRefreshIsAccurateAndDeterministic) {
   const SpMat A0 = laplacian(10, 0.05);
-  struct Run {
-    std::vector<VecX> x;
-    int iterations = 0, background = 0, inline_refreshes = 0;
-  };
-  auto run = [&](int lag, double advantage) {
-    LinearSolverOptions o;
-    o.tolerance = 1e-8;
-    o.factor_flop_advantage = advantage;
-    o.factor_lag_solves = lag;
-    o.max_iterations = 1000;
-    auto s = make_linear_solver("pcg", o);
-    s->analyze_pattern(A0);
-    Run r;
-    for (int k = 0; k < 60; ++k) {
-      SpMat A = A0;
-      for (int i = 0; i < A.rows() / 2; ++i) A.coeffRef(i, i) += 0.2 * k * (1.0 + (i % 7));
-      EXPECT_TRUE(s->factorize(A));
-      const VecX b = VecX::LinSpaced(A.rows(), -1.0, 2.0);
-      VecX x = VecX::Zero(A.rows());
-      const SolveInfo info = s->solve(b, x);
-      EXPECT_TRUE(info.ok);
-      EXPECT_LT((A * x - b).norm(), 1e-7 * b.norm());
-      r.iterations += info.iterations;
-      r.background += info.background ? 1 : 0;
-      r.inline_refreshes += info.refactorized && !info.background ? 1 : 0;
-      r.x.push_back(x);
-    }
-    return r;
-  };
-  const Run a = run(3, 1.5), b = run(3, 1.5), never = run(3, 1e-12);
+  LinearSolverOptions o;
+  o.factor_flop_advantage = 1.5;
+  o.factor_lag_solves = 3;
+  const DriftRun a = drift_run(A0, o), b = drift_run(A0, o);
+  o.factor_flop_advantage = 1e-12;
+  const DriftRun never = drift_run(A0, o);
   EXPECT_GT(a.background, 2);
   EXPECT_EQ(a.inline_refreshes, 0);  // the first factor comes from factorize(), not from a solve
   EXPECT_LT(a.iterations, never.iterations / 2);

@@ -54,12 +54,9 @@ TEST(LinearSolver, AllSolversMatchDenseReference) {
   }
 }
 
-// The implicit Euler system of a small mixed-level FEM model (hanging slots bound to their carriers, a clamped
-// face): 3 x 3 blocks, so the ordering is computed on the block graph and handed to CHOLMOD as a given ordering.
-TEST(LinearSolver, BlockOrderingOnFemSystemMatchesDenseReference) {
-  const ObjectModel m = test::box_model({Vec3(0, 0, 0), Vec3(1, 1, 1)}, Vec3(0, 0, 0), 1.0, 2,
-                                        {{Box3{Vec3(0.3, 0.3, 0.3), Vec3(0.6, 0.6, 0.6)}, 4}});
-  ASSERT_GT(m.dofs().hanging_slots, 0);
+// The implicit Euler system matrices M + k K of model m at rest with its z = 0 face clamped, one per stiffness
+// coefficient k.
+std::vector<SpMat> implicit_systems(const ObjectModel& m, const std::vector<double>& k) {
   const int nd = m.num_dofs();
   std::vector<char> constrained(static_cast<std::size_t>(nd), 0);
   for (int d = 0; d < nd; ++d) constrained[std::size_t(d)] = m.dofs().dof_rest[std::size_t(d)].z() <= 1e-12;
@@ -67,9 +64,23 @@ TEST(LinearSolver, BlockOrderingOnFemSystemMatchesDenseReference) {
   FemSystem fem(m, ex);
   ElementFrame frame;
   fem.rotations(m.dofs().dof_rest, frame);
-  SpMat A;
-  VecX coupling;
-  fem.assemble_system(1.0, 1e-4, frame, constrained, VecX::Zero(3 * nd), A, coupling);
+  std::vector<SpMat> out;
+  for (const double kc : k) {
+    SpMat A;
+    VecX coupling;
+    fem.assemble_system(1.0, kc, frame, constrained, VecX::Zero(3 * nd), A, coupling);
+    out.push_back(A);
+  }
+  return out;
+}
+
+// The implicit Euler system of a small mixed-level FEM model (hanging slots bound to their carriers, a clamped
+// face): 3 x 3 blocks, so the ordering is computed on the block graph and handed to CHOLMOD as a given ordering.
+TEST(LinearSolver, BlockOrderingOnFemSystemMatchesDenseReference) {
+  const ObjectModel m = test::box_model({Vec3(0, 0, 0), Vec3(1, 1, 1)}, Vec3(0, 0, 0), 1.0, 2,
+                                        {{Box3{Vec3(0.3, 0.3, 0.3), Vec3(0.6, 0.6, 0.6)}, 4}});
+  ASSERT_GT(m.dofs().hanging_slots, 0);
+  const SpMat A = implicit_systems(m, {1e-4})[0];
   const VecX b = VecX::LinSpaced(A.rows(), -1.0, 2.0);
   const Eigen::MatrixXd dense(A);
   const VecX ref = dense.llt().solve(b);
@@ -210,21 +221,9 @@ TEST(LinearSolver, PcgRefreshesTheFactorOfADriftingMatrixAndSavesWork) {
 std::vector<SpMat> drifting_fem_systems(int count) {
   const ObjectModel m = test::box_model({Vec3(0, 0, 0), Vec3(1, 1, 1)}, Vec3(0, 0, 0), 1.0, 3,
                                         {{Box3{Vec3(0.2, 0.2, 0.2), Vec3(0.7, 0.7, 0.7)}, 4}});
-  const int nd = m.num_dofs();
-  std::vector<char> constrained(static_cast<std::size_t>(nd), 0);
-  for (int d = 0; d < nd; ++d) constrained[std::size_t(d)] = m.dofs().dof_rest[std::size_t(d)].z() <= 1e-12;
-  Executor ex(1);
-  FemSystem fem(m, ex);
-  ElementFrame frame;
-  fem.rotations(m.dofs().dof_rest, frame);
-  std::vector<SpMat> out;
-  for (int k = 0; k < count; ++k) {
-    SpMat A;
-    VecX coupling;
-    fem.assemble_system(1.0, 1e-3 * (1.0 + 0.15 * k), frame, constrained, VecX::Zero(3 * nd), A, coupling);
-    out.push_back(A);
-  }
-  return out;
+  std::vector<double> k;
+  for (int i = 0; i < count; ++i) k.push_back(1e-3 * (1.0 + 0.15 * i));
+  return implicit_systems(m, k);
 }
 
 // PCG preconditioned with the factor rounded to single precision converges to the same tolerance in at most one

@@ -442,6 +442,30 @@ std::vector<ComponentInfo> component_info(const ObjectModel& model, const std::v
   return info;
 }
 
+namespace {
+// Where new DOF d of `to` takes its value from in `from` (see transfer_state): the old leaf and the trilinear weights
+// of its 8 slots at the DOF's node; leaf -1 when no old leaf holds the node.
+struct TransferSource {
+  int leaf = -1;
+  std::array<double, 8> w{};
+};
+TransferSource transfer_source(const ObjectModel& from, const ObjectModel& to, int d) {
+  const DofMap& dm = to.dofs();
+  // The old leaf that contains the new DOF's own leaf interpolates the old field at the DOF's node.
+  const int slot = dm.dof_slot[std::size_t(d)];
+  const Cell& leaf = to.tree().leaf(slot / 8);
+  int old = from.tree().locate_cell(leaf.anchor);
+  if (old >= 0 && from.tree().leaf(old).level > leaf.level) old = -1;
+  const GridPoint n = node_from_key(dm.dof_node[std::size_t(d)]);
+  if (old < 0) old = from.tree().locate_point(n);
+  TransferSource src;
+  if (old < 0) return src;
+  src.leaf = old;
+  src.w = trilinear_weights(from.tree().leaf(old).local(n).cwiseMax(0.0).cwiseMin(1.0));
+  return src;
+}
+}  // namespace
+
 SimState transfer_state(const ObjectModel& from, const SimState& state, const ObjectModel& to) {
   std::vector<Vec3> xs, vs;
   from.dofs().prolong(state.x, xs);
@@ -453,29 +477,40 @@ SimState transfer_state(const ObjectModel& from, const SimState& state, const Ob
   out.x.resize(std::size_t(dm.num_dofs));
   out.v.resize(std::size_t(dm.num_dofs));
   for (int d = 0; d < dm.num_dofs; ++d) {
-    // The old leaf that contains the new DOF's own leaf interpolates the old field at the DOF's node.
-    const int slot = dm.dof_slot[std::size_t(d)];
-    const Cell& leaf = to.tree().leaf(slot / 8);
-    int old = from.tree().locate_cell(leaf.anchor);
-    if (old >= 0 && from.tree().leaf(old).level > leaf.level) old = -1;
-    const GridPoint n = node_from_key(dm.dof_node[std::size_t(d)]);
-    if (old < 0) old = from.tree().locate_point(n);
-    if (old < 0) {
+    const TransferSource src = transfer_source(from, to, d);
+    if (src.leaf < 0) {
       out.x[std::size_t(d)] = dm.dof_rest[std::size_t(d)];
       out.v[std::size_t(d)] = Vec3::Zero();
       continue;
     }
-    const std::array<double, 8> w =
-        trilinear_weights(from.tree().leaf(old).local(n).cwiseMax(0.0).cwiseMin(1.0));
     Vec3 x = Vec3::Zero(), v = Vec3::Zero();
     for (int k = 0; k < 8; ++k) {
-      x += w[std::size_t(k)] * xs[8 * std::size_t(old) + std::size_t(k)];
-      v += w[std::size_t(k)] * vs[8 * std::size_t(old) + std::size_t(k)];
+      x += src.w[std::size_t(k)] * xs[8 * std::size_t(src.leaf) + std::size_t(k)];
+      v += src.w[std::size_t(k)] * vs[8 * std::size_t(src.leaf) + std::size_t(k)];
     }
     out.x[std::size_t(d)] = x;
     out.v[std::size_t(d)] = v;
   }
   return out;
+}
+
+SpMat transfer_matrix(const ObjectModel& from, const ObjectModel& to) {
+  const DofMap& old = from.dofs();
+  std::vector<Eigen::Triplet<double>> t;
+  t.reserve(std::size_t(to.num_dofs()) * 8);
+  for (int d = 0; d < to.num_dofs(); ++d) {
+    const TransferSource src = transfer_source(from, to, d);
+    if (src.leaf < 0) continue;
+    for (int k = 0; k < 8; ++k) {
+      if (src.w[std::size_t(k)] == 0.0) continue;
+      const std::size_t slot = 8 * std::size_t(src.leaf) + std::size_t(k);
+      for (int i = old.slot_begin[slot]; i < old.slot_begin[slot + 1]; ++i)
+        t.emplace_back(d, old.slot_dof[std::size_t(i)], src.w[std::size_t(k)] * old.slot_weight[std::size_t(i)]);
+    }
+  }
+  SpMat T(to.num_dofs(), from.num_dofs());
+  T.setFromTriplets(t.begin(), t.end());  // sums the weights of an old DOF reached through several slots
+  return T;
 }
 
 }  // namespace octocut::sim

@@ -88,6 +88,7 @@ struct PreparedModel::Impl {
   std::vector<char> constrained;       // 1 for DOFs driven by a handle (num_dofs)
   std::unique_ptr<LinearSolver> solver;
   bool analyzed = false;
+  SpMat transfer;  // DOF values old revision -> this one (num_dofs x old num_dofs), for the solver's inherit()
 };
 
 PreparedModel::PreparedModel() = default;
@@ -112,6 +113,7 @@ PreparedModel Simulator::prepare_model(ObjectModel model, bool analyze) const {
     try {
       p.solver->analyze_pattern(p.fem->system_pattern(p.constrained));
       p.analyzed = true;
+      if (m_options.factor_lag > 0 && m_options.linear_solver == "pcg") p.transfer = transfer_matrix(m_model, *p.model);
     } catch (const std::exception&) {
       // The next step analyses the pattern again, and its guards handle a solver failure.
     }
@@ -131,6 +133,7 @@ void Simulator::adopt(PreparedModel prepared) {
   m_fem = std::move(p.fem);
   m_fem->rebind(m_model, *m_executor);
   m_constrained = std::move(p.constrained);
+  if (p.analyzed && p.transfer.size() > 0 && m_solver) p.solver->inherit(*m_solver, p.transfer);
   m_solver = std::move(p.solver);
   m_A = SpMat();
   m_pattern_analyzed = p.analyzed;

@@ -242,9 +242,10 @@ Entry make_scene_schema() {
           integer("factor_lag", 0, closed(0, 64),
                   "`pcg`: when its lagged Cholesky factor is due for a refresh, factorise on a second thread and put "
                   "the new factor in place this many solves later (sooner once the iterations since have cost as "
-                  "much as a factorisation), so that no step stalls on the factorisation; deterministic, whatever "
-                  "the timing. 0 refreshes inline, in the step that finds it due. The first factor after a cut is "
-                  "always computed inline."),
+                  "much as a factorisation), so that no step stalls on the factorisation; after a cut, precondition "
+                  "the first solves with the old factor (through the transfer of the DOFs) and an exact solve on "
+                  "the cut's region while the new pattern's first factor is computed the same way. Deterministic, "
+                  "whatever the timing. 0 factorises inline, in the step that needs it."),
           integer("threads", 0, closed(0, 256), "Worker threads; 0 uses the hardware concurrency."),
           number("max_speed", 100.0, greater_than(0),
                  "Speed guard, m/s: a step that moves any DOF faster is rolled back."),

@@ -32,6 +32,12 @@ class LinearSolver {
   /// Block size of the graph the last fill-reducing ordering was computed on: 3 when A is made of 3 x 3 blocks (the
   /// FEM system: one node per DOF), 1 for a scalar pattern, 0 when the solver does not factorise.
   [[nodiscard]] virtual int ordering_block_size() const { return 0; }
+  /// Called on the solver of a new revision (after analyze_pattern, before the first factorize) with the solver of
+  /// the revision it replaces and the transfer T of DOF values from the old revision to the new (new x old DOFs, per
+  /// coordinate; see transfer_matrix). pcg with factor_lag_solves > 0 takes over the old lagged factor and
+  /// preconditions its first solves with it through T while the new pattern's first factor is computed in the
+  /// background; the others ignore it. `previous` is then left without a factor.
+  virtual void inherit(LinearSolver& previous, const SpMat& transfer) {}
 };
 
 struct LinearSolverOptions {

@@ -241,4 +241,9 @@ struct SimState {
 /// A new leaf that no old leaf contains (only a coarsening would make one) falls back to any old leaf at the node.
 SimState transfer_state(const ObjectModel& from, const SimState& state, const ObjectModel& to);
 
+/// The linear map transfer_state applies to positions, as a matrix: row d of `to`'s DOFs holds the weights of
+/// `from`'s DOFs that DOF d interpolates (to.num_dofs() x from.num_dofs(), each row summing to 1; empty rows for the
+/// DOFs transfer_state puts at rest). x_to = T x_from per coordinate, for positions expressed as DOF values.
+SpMat transfer_matrix(const ObjectModel& from, const ObjectModel& to);
+
 }  // namespace octocut::sim

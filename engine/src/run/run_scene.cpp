@@ -1,5 +1,7 @@
 // `octocut run`: a thin loop over engine::World, plus the render thread, the frame writer, the surface files, the
 // progress line and the report file.
+#include <sys/resource.h>
+#include <sys/syscall.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -61,8 +63,15 @@ class Run {
     if (!m_world.renders()) return;
     RenderThread::Factory factory = m_options.renderer_factory;
     if (!factory) factory = [] { return make_renderer(); };
+    // On the render thread: lower its priority first, so that it and llvmpipe's rasteriser threads (which start with
+    // its context and inherit it) draw with what the simulation leaves of the cores (docs/RESULTS.md, "Frames on a
+    // render thread"). Best effort.
+    RenderThread::Factory lowered = [factory = std::move(factory)] {
+      (void)setpriority(PRIO_PROCESS, id_t(syscall(SYS_gettid)), 19);
+      return factory();
+    };
     m_render = std::make_unique<RenderThread>(
-        std::move(factory), [this](long index, Image image) {
+        std::move(lowered), [this](long index, Image image) {
           if (m_writer) m_writer->push(index, std::move(image));
         },
         kRenderQueue);

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <csignal>
 #include <chrono>
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -243,6 +244,37 @@ TEST_F(RenderThreadRun, ARenderFailurePartWayFailsTheRunWithTheFramesBeforeIt) {
   EXPECT_FALSE(fs::exists(frame_path(m_dir / "out/frames", 3)));
   for (const auto& e : fs::directory_iterator(m_dir / "out/frames"))
     EXPECT_EQ(e.path().filename().string().find(".tmp"), std::string::npos) << e.path();
+}
+
+TEST_F(RenderThreadRun, SigintStopsTheRunAndJoinsTheThreadWithEveryFrameWhole) {
+  // A long run, interrupted once two frames are on disk: the run fails with its report, the render thread is joined,
+  // and the frames on disk are 0..n-1 without a gap, each a whole PNG, as many as the report says were written.
+  m_scene.duration = 1000.0;  // far longer than the wait below
+  RunOptions options;
+  options.out_dir = (m_dir / "out").string();
+  std::thread interrupter([&] {
+    for (int i = 0; i < 3000 && !fs::exists(frame_path(m_dir / "out/frames", 1)); ++i)
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    std::raise(SIGINT);
+  });
+  const RunResult result = run_scene(m_scene, options);
+  interrupter.join();
+  EXPECT_EQ(result.exit_code, 1);
+  const json report = test::read_json(m_dir / "out/report.json");
+  EXPECT_EQ(report["status"], "failed");
+  EXPECT_NE(report["error"].get<std::string>().find("interrupted"), std::string::npos) << report["error"];
+  const long written = report["frames"]["written"].get<long>();
+  EXPECT_GE(written, 2);
+  long on_disk = 0;
+  for (const auto& e : fs::directory_iterator(m_dir / "out/frames")) {
+    EXPECT_EQ(e.path().filename().string().find(".tmp"), std::string::npos) << e.path();
+    ++on_disk;
+  }
+  EXPECT_EQ(on_disk, written);
+  for (long i = 0; i < written; ++i) {
+    const fs::path file = frame_path(m_dir / "out/frames", i);
+    EXPECT_EQ(decode_png(read_file(file), file.string()).width, 128) << file;
+  }
 }
 
 TEST_F(RenderThreadRun, ARendererThatCannotStartFailsBeforeTheFirstStep) {

@@ -436,32 +436,16 @@ struct GlDrawer::Impl {
 
   /// The pixels geometry can cover: the projections of every mesh's bounding box (a triangle's projection lies
   /// within the projection of any box that holds it, as long as the box is in front of the eye), grown by two
-  /// pixels, within the arthroscope mask's square. The whole frame when a box reaches behind the eye or when
-  /// overlays are drawn.
+  /// pixels, within the arthroscope mask's square. The whole frame (within the mask's square) when a box reaches
+  /// behind the eye or when overlays are drawn.
   static Rect active_region(const RenderScene& scene, const Eigen::Matrix4f& view_projection) {
-    const Rect full{0, 0, scene.width, scene.height};
-    if (!scene.lines.empty() || !scene.points.empty()) return full;
     float x0 = 1e30f, y0 = 1e30f, x1 = -1e30f, y1 = -1e30f;
-    for (const RenderMesh& mesh : scene.meshes) {
-      if (mesh.positions.empty() || mesh.triangles.empty()) continue;
-      Eigen::Vector3f lo = mesh.positions.front(), hi = lo;
-      for (const Eigen::Vector3f& p : mesh.positions) {
-        lo = lo.cwiseMin(p);
-        hi = hi.cwiseMax(p);
-      }
-      const Eigen::Matrix4f mvp = view_projection * mesh.model;
-      for (int k = 0; k < 8; ++k) {
-        const Eigen::Vector4f corner(k & 1 ? hi.x() : lo.x(), k & 2 ? hi.y() : lo.y(), k & 4 ? hi.z() : lo.z(), 1.0f);
-        const Eigen::Vector4f clip = mvp * corner;
-        if (!(clip.w() > 1e-6f)) return full;
-        const float px = (0.5f * clip.x() / clip.w() + 0.5f) * float(scene.width);
-        const float py = (0.5f * clip.y() / clip.w() + 0.5f) * float(scene.height);
-        x0 = std::min(x0, px);
-        y0 = std::min(y0, py);
-        x1 = std::max(x1, px);
-        y1 = std::max(y1, py);
-      }
+    if (!bounds_on_screen(scene, view_projection, x0, y0, x1, y1)) {
+      x0 = y0 = 0.0f;
+      x1 = float(scene.width);
+      y1 = float(scene.height);
     }
+    // Outside the arthroscope mask's square everything is black in the end, whatever was drawn.
     if (scene.camera.mask) {
       const float r = mask_radius_px(scene), cx = 0.5f * float(scene.width), cy = 0.5f * float(scene.height);
       x0 = std::max(x0, cx - r);
@@ -474,6 +458,34 @@ struct GlDrawer::Impl {
            clamp_to(std::ceil(x1) + 2.0f, scene.width), clamp_to(std::ceil(y1) + 2.0f, scene.height)};
     if (r.x1 <= r.x0 || r.y1 <= r.y0) r = Rect{};
     return r;
+  }
+
+  /// Grows [x0, x1] x [y0, y1] (pixels, GL window coordinates) by the projections of every mesh's bounding box. False
+  /// when the frame has no such bound: a box reaches behind the eye, or overlays are drawn.
+  static bool bounds_on_screen(const RenderScene& scene, const Eigen::Matrix4f& view_projection, float& x0, float& y0,
+                               float& x1, float& y1) {
+    if (!scene.lines.empty() || !scene.points.empty()) return false;
+    for (const RenderMesh& mesh : scene.meshes) {
+      if (mesh.positions.empty() || mesh.triangles.empty()) continue;
+      Eigen::Vector3f lo = mesh.positions.front(), hi = lo;
+      for (const Eigen::Vector3f& p : mesh.positions) {
+        lo = lo.cwiseMin(p);
+        hi = hi.cwiseMax(p);
+      }
+      const Eigen::Matrix4f mvp = view_projection * mesh.model;
+      for (int k = 0; k < 8; ++k) {
+        const Eigen::Vector4f corner(k & 1 ? hi.x() : lo.x(), k & 2 ? hi.y() : lo.y(), k & 4 ? hi.z() : lo.z(), 1.0f);
+        const Eigen::Vector4f clip = mvp * corner;
+        if (!(clip.w() > 1e-6f)) return false;
+        const float px = (0.5f * clip.x() / clip.w() + 0.5f) * float(scene.width);
+        const float py = (0.5f * clip.y() / clip.w() + 0.5f) * float(scene.height);
+        x0 = std::min(x0, px);
+        y0 = std::min(y0, py);
+        x1 = std::max(x1, px);
+        y1 = std::max(y1, py);
+      }
+    }
+    return true;
   }
 
   /// Uploads positions into attribute 0 of the bound VAO.

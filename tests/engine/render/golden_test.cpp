@@ -380,6 +380,39 @@ TEST_F(GoldenTest, ArthroscopeMask) {
   EXPECT_EQ(pixel(image, 80 + 45, 60), (std::array<int, 3>{51, 51, 51}));   // inside the circle, off the sphere
 }
 
+TEST_F(GoldenTest, MaskedFramesEqualUnmaskedOnesInsideTheCircleAlsoWithABoxBehindTheEye) {
+  // With the mask, only the mask's square is multisampled, also when a mesh's box reaches behind the eye (a small box
+  // behind the camera here: invisible, but it makes the projected bounds unbounded). Truth: the unmasked frame of the
+  // same scene, drawn over the whole frame, inside the circle, and black outside. The sphere covers the circle's rim,
+  // so a square clipped too tight would show.
+  RenderScene scene = base_scene();
+  scene.meshes.push_back(sphere({0, 0, 0}, 1.6f, 48, 24, MaterialKind::tissue));
+  scene.meshes.push_back(box({-0.2f, -6.2f, 0.8f}, {0.2f, -5.8f, 1.2f}));  // the camera is at (0, -4, 1)
+  scene.camera.arthroscope = true;
+  scene.camera.mask = true;
+  scene.camera.mask_radius = 0.9;
+  RenderScene unmasked = scene;
+  unmasked.camera.mask = false;
+  const Image a = s_renderer->render(scene), b = s_renderer->render(unmasked);
+  const double r = 0.9 * 0.5 * kHeight, cx = 0.5 * kWidth, cy = 0.5 * kHeight;
+  long inside = 0, sphere_at_rim = 0;
+  for (int y = 0; y < kHeight; ++y)
+    for (int x = 0; x < kWidth; ++x) {
+      // GL window y runs up; the image's rows run down: the circle is symmetric, the centre the same.
+      const double d = std::hypot(x + 0.5 - cx, y + 0.5 - cy);
+      if (std::abs(d - r) < 1e-3) continue;  // on the circle: float rounding decides
+      if (d > r) {
+        EXPECT_EQ(pixel(a, x, y), (std::array<int, 3>{0, 0, 0})) << x << ", " << y;
+      } else {
+        ++inside;
+        EXPECT_EQ(pixel(a, x, y), pixel(b, x, y)) << x << ", " << y;
+        if (d > r - 2.0 && pixel(b, x, y) != std::array<int, 3>{51, 51, 51}) ++sphere_at_rim;
+      }
+    }
+  EXPECT_GT(inside, 8000);
+  EXPECT_GT(sphere_at_rim, 100);
+}
+
 TEST_F(GoldenTest, DebugOverlays) {
   RenderScene scene = base_scene();
   scene.meshes.push_back(box({-1.0f, -1.0f, -1.0f}, {1.0f, 1.0f, 1.0f}));

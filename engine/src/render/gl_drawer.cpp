@@ -315,7 +315,6 @@ struct GlDrawer::Impl {
     glDepthFunc(GL_LESS);
     glCullFace(GL_BACK);
     glFrontFace(GL_CCW);
-    glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
     glBindVertexArray(m_vao);
 
     // Meshes.
@@ -336,7 +335,20 @@ struct GlDrawer::Impl {
     // Faces are pushed back a little so that wireframe lines lying on them win the depth test.
     glEnable(GL_POLYGON_OFFSET_FILL);
     glPolygonOffset(1.0f, 1.0f);
-    for (const RenderMesh& mesh : scene.meshes) draw_mesh(mesh);
+    // The still meshes come from the layer kept from an earlier frame (copied in with its depth), or the region is
+    // cleared; then the rest is drawn. Depth decides per sample, so the order changes nothing but exact ties.
+    const bool layered = prepare_still_layer(scene, view_projection, lights, region);
+    if (!layered) {
+      glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+    } else if (region.x1 > region.x0 && region.y1 > region.y0) {
+      glBindFramebuffer(GL_READ_FRAMEBUFFER, m_layer_fbo);
+      glBindFramebuffer(GL_DRAW_FRAMEBUFFER, m_msaa_fbo);
+      glBlitFramebuffer(region.x0, region.y0, region.x1, region.y1, region.x0, region.y0, region.x1, region.y1,
+                        GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT, GL_NEAREST);
+      glBindFramebuffer(GL_FRAMEBUFFER, m_msaa_fbo);
+    }
+    for (const RenderMesh& mesh : scene.meshes)
+      if (!(layered && mesh.still)) draw_mesh(mesh);
     glDisable(GL_POLYGON_OFFSET_FILL);
     glDisable(GL_CULL_FACE);
 
@@ -424,32 +436,16 @@ struct GlDrawer::Impl {
 
   /// The pixels geometry can cover: the projections of every mesh's bounding box (a triangle's projection lies
   /// within the projection of any box that holds it, as long as the box is in front of the eye), grown by two
-  /// pixels, within the arthroscope mask's square. The whole frame when a box reaches behind the eye or when
-  /// overlays are drawn.
+  /// pixels, within the arthroscope mask's square. The whole frame (within the mask's square) when a box reaches
+  /// behind the eye or when overlays are drawn.
   static Rect active_region(const RenderScene& scene, const Eigen::Matrix4f& view_projection) {
-    const Rect full{0, 0, scene.width, scene.height};
-    if (!scene.lines.empty() || !scene.points.empty()) return full;
     float x0 = 1e30f, y0 = 1e30f, x1 = -1e30f, y1 = -1e30f;
-    for (const RenderMesh& mesh : scene.meshes) {
-      if (mesh.positions.empty() || mesh.triangles.empty()) continue;
-      Eigen::Vector3f lo = mesh.positions.front(), hi = lo;
-      for (const Eigen::Vector3f& p : mesh.positions) {
-        lo = lo.cwiseMin(p);
-        hi = hi.cwiseMax(p);
-      }
-      const Eigen::Matrix4f mvp = view_projection * mesh.model;
-      for (int k = 0; k < 8; ++k) {
-        const Eigen::Vector4f corner(k & 1 ? hi.x() : lo.x(), k & 2 ? hi.y() : lo.y(), k & 4 ? hi.z() : lo.z(), 1.0f);
-        const Eigen::Vector4f clip = mvp * corner;
-        if (!(clip.w() > 1e-6f)) return full;
-        const float px = (0.5f * clip.x() / clip.w() + 0.5f) * float(scene.width);
-        const float py = (0.5f * clip.y() / clip.w() + 0.5f) * float(scene.height);
-        x0 = std::min(x0, px);
-        y0 = std::min(y0, py);
-        x1 = std::max(x1, px);
-        y1 = std::max(y1, py);
-      }
+    if (!bounds_on_screen(scene, view_projection, x0, y0, x1, y1)) {
+      x0 = y0 = 0.0f;
+      x1 = float(scene.width);
+      y1 = float(scene.height);
     }
+    // Outside the arthroscope mask's square everything is black in the end, whatever was drawn.
     if (scene.camera.mask) {
       const float r = mask_radius_px(scene), cx = 0.5f * float(scene.width), cy = 0.5f * float(scene.height);
       x0 = std::max(x0, cx - r);
@@ -462,6 +458,34 @@ struct GlDrawer::Impl {
            clamp_to(std::ceil(x1) + 2.0f, scene.width), clamp_to(std::ceil(y1) + 2.0f, scene.height)};
     if (r.x1 <= r.x0 || r.y1 <= r.y0) r = Rect{};
     return r;
+  }
+
+  /// Grows [x0, x1] x [y0, y1] (pixels, GL window coordinates) by the projections of every mesh's bounding box. False
+  /// when the frame has no such bound: a box reaches behind the eye, or overlays are drawn.
+  static bool bounds_on_screen(const RenderScene& scene, const Eigen::Matrix4f& view_projection, float& x0, float& y0,
+                               float& x1, float& y1) {
+    if (!scene.lines.empty() || !scene.points.empty()) return false;
+    for (const RenderMesh& mesh : scene.meshes) {
+      if (mesh.positions.empty() || mesh.triangles.empty()) continue;
+      Eigen::Vector3f lo = mesh.positions.front(), hi = lo;
+      for (const Eigen::Vector3f& p : mesh.positions) {
+        lo = lo.cwiseMin(p);
+        hi = hi.cwiseMax(p);
+      }
+      const Eigen::Matrix4f mvp = view_projection * mesh.model;
+      for (int k = 0; k < 8; ++k) {
+        const Eigen::Vector4f corner(k & 1 ? hi.x() : lo.x(), k & 2 ? hi.y() : lo.y(), k & 4 ? hi.z() : lo.z(), 1.0f);
+        const Eigen::Vector4f clip = mvp * corner;
+        if (!(clip.w() > 1e-6f)) return false;
+        const float px = (0.5f * clip.x() / clip.w() + 0.5f) * float(scene.width);
+        const float py = (0.5f * clip.y() / clip.w() + 0.5f) * float(scene.height);
+        x0 = std::min(x0, px);
+        y0 = std::min(y0, py);
+        x1 = std::max(x1, px);
+        y1 = std::max(y1, py);
+      }
+    }
+    return true;
   }
 
   /// Uploads positions into attribute 0 of the bound VAO.
@@ -553,6 +577,68 @@ struct GlDrawer::Impl {
     glDrawElements(GL_TRIANGLES, GLsizei(3 * triangles->size()), GL_UNSIGNED_INT, nullptr);
   }
 
+  static bool same_mesh(const RenderMesh& a, const RenderMesh& b) {
+    return a.material == b.material && a.cull_back_faces == b.cull_back_faces && a.model == b.model &&
+           a.positions == b.positions && a.normals == b.normals && a.triangles == b.triangles && a.cut == b.cut;
+  }
+
+  /// Makes sure the still layer holds the scene's still meshes (RenderMesh::still) drawn over the background, with
+  /// their depth, at the current size and sample count, for this camera and these lights: reused when all of these
+  /// compare equal to the frame it was drawn for, redrawn otherwise (over the whole frame, so that any later region
+  /// can be copied from it). False when the scene has no still mesh. Leaves the multisampled target bound with the
+  /// scissor at `region`; the mesh programs' frame uniforms must be set.
+  bool prepare_still_layer(const RenderScene& scene, const Eigen::Matrix4f& view_projection,
+                           const std::vector<RenderLight>& lights, const Rect& region) {
+    std::vector<const RenderMesh*> still;
+    for (const RenderMesh& mesh : scene.meshes)
+      if (mesh.still) still.push_back(&mesh);
+    if (still.empty()) return false;
+    const auto same_light = [](const RenderLight& a, const RenderLight& b) {
+      return a.position == b.position && a.color == b.color;
+    };
+    bool valid = m_layer_valid && m_layer_view_projection == view_projection && m_layer_eye == m_eye &&
+                 m_layer_background == scene.background && m_layer_lights.size() == lights.size() &&
+                 m_layer_meshes.size() == still.size();
+    for (std::size_t i = 0; valid && i < lights.size(); ++i) valid = same_light(m_layer_lights[i], lights[i]);
+    for (std::size_t i = 0; valid && i < still.size(); ++i) valid = same_mesh(m_layer_meshes[i], *still[i]);
+    if (valid) return true;
+
+    // Redraw the layer: the background and the still meshes over the whole frame.
+    if (m_layer_fbo == 0) create_layer();
+    glBindFramebuffer(GL_FRAMEBUFFER, m_layer_fbo);
+    glScissor(0, 0, m_width, m_height);
+    glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+    for (const RenderMesh* mesh : still) draw_mesh(*mesh);
+    gl_check("drawing the still meshes");
+    m_layer_valid = true;
+    m_layer_view_projection = view_projection;
+    m_layer_eye = m_eye;
+    m_layer_background = scene.background;
+    m_layer_lights = lights;
+    m_layer_meshes.clear();
+    for (const RenderMesh* mesh : still) m_layer_meshes.push_back(*mesh);
+    glBindFramebuffer(GL_FRAMEBUFFER, m_msaa_fbo);
+    glScissor(region.x0, region.y0, std::max(region.x1 - region.x0, 0), std::max(region.y1 - region.y0, 0));
+    return true;
+  }
+
+  /// The still layer's framebuffer: multisampled colour and depth like the drawing target's.
+  void create_layer() {
+    glGenRenderbuffers(2, m_layer_renderbuffers);
+    glGenFramebuffers(1, &m_layer_fbo);
+    glBindFramebuffer(GL_FRAMEBUFFER, m_layer_fbo);
+    const GLsizei samples = m_samples > 1 ? m_samples : 0;
+    glBindRenderbuffer(GL_RENDERBUFFER, m_layer_renderbuffers[0]);
+    glRenderbufferStorageMultisample(GL_RENDERBUFFER, samples, GL_RGBA8, m_width, m_height);
+    glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_RENDERBUFFER, m_layer_renderbuffers[0]);
+    glBindRenderbuffer(GL_RENDERBUFFER, m_layer_renderbuffers[1]);
+    glRenderbufferStorageMultisample(GL_RENDERBUFFER, samples, GL_DEPTH_COMPONENT24, m_width, m_height);
+    glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, m_layer_renderbuffers[1]);
+    if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
+      throw RenderError("OpenGL: the still layer's framebuffer is incomplete");
+    gl_check("creating the still layer");
+  }
+
   /// (Re)creates the multisampled and the resolve framebuffers for a new size or sample count.
   void ensure_framebuffers(int width, int height, int samples) {
     if (width == m_width && height == m_height && samples == m_samples) return;
@@ -587,6 +673,13 @@ struct GlDrawer::Impl {
   }
 
   void release_framebuffers() {
+    if (m_layer_fbo != 0) {
+      glDeleteFramebuffers(1, &m_layer_fbo);
+      glDeleteRenderbuffers(2, m_layer_renderbuffers);
+      m_layer_fbo = 0;
+    }
+    m_layer_valid = false;
+    m_layer_meshes.clear();
     if (m_msaa_fbo == 0) return;
     glDeleteFramebuffers(1, &m_msaa_fbo);
     glDeleteFramebuffers(1, &m_resolve_fbo);
@@ -607,6 +700,16 @@ struct GlDrawer::Impl {
   std::vector<std::array<std::int32_t, 3>> m_front_triangles;     ///< scratch: the triangles facing the eye
   std::vector<std::uint8_t> m_front_cut;                          ///< scratch: their cut flags
   std::vector<std::uint8_t> m_readback;   ///< bottom-up rows from glReadPixels (3 * width * height)
+  // The still layer: the still meshes of an earlier frame over the background, multisampled, with depth, and what
+  // they were drawn with (compared each frame).
+  GLuint m_layer_fbo = 0;
+  GLuint m_layer_renderbuffers[2] = {0, 0};  ///< colour, depth
+  bool m_layer_valid = false;
+  Eigen::Matrix4f m_layer_view_projection = Eigen::Matrix4f::Zero();
+  Eigen::Vector3f m_layer_eye = Eigen::Vector3f::Zero();
+  Eigen::Vector3f m_layer_background = Eigen::Vector3f::Zero();
+  std::vector<RenderLight> m_layer_lights;
+  std::vector<RenderMesh> m_layer_meshes;  ///< copies of the still meshes drawn into the layer
 };
 
 GlDrawer::GlDrawer() : m(std::make_unique<Impl>()) {}

@@ -41,7 +41,9 @@ std::string report_json(const Report& r) {
   j["sim_time_s"] = num(r.sim_time_s);
   j["wall_time_s"] = r.wall_time_s;
   j["realtime_factor"] = r.realtime_factor;
-  j["timing_ms"] = {{"step", timing(r.step_ms)}, {"render", timing(r.render_ms)}, {"frame_write", timing(r.frame_write_ms)}};
+  j["timing_ms"] = {{"step", timing(r.step_ms)},         {"render", timing(r.render_ms)},
+                    {"frame_write", timing(r.frame_write_ms)}, {"snapshot", timing(r.snapshot_ms)},
+                    {"render_wait", timing(r.render_wait_ms)}};
   j["frames"] = {{"rendered", r.frames_rendered}, {"written", r.frames}};
   j["counts"] = {{"elements", r.elements},         {"dofs", r.dofs},
                  {"hanging_slots", r.hanging_slots}, {"tets", r.tets},

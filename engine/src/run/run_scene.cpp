@@ -1,5 +1,7 @@
-// `octocut run`: a thin loop over engine::World, plus the renderer, the frame writer, the surface files, the progress
-// line and the report file.
+// `octocut run`: a thin loop over engine::World, plus the render thread, the frame writer, the surface files, the
+// progress line and the report file.
+#include <sys/resource.h>
+#include <sys/syscall.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -12,6 +14,7 @@
 #include "octocut/engine/io/io.hpp"
 #include "octocut/engine/io/mesh_io.hpp"
 #include "octocut/engine/render/frame_writer.hpp"
+#include "octocut/engine/render/render_thread.hpp"
 #include "octocut/engine/render/renderer.hpp"
 #include "octocut/engine/run/run.hpp"
 #include "octocut/engine/run/world.hpp"
@@ -53,17 +56,32 @@ class Run {
  public:
   Run(World& world, const RunOptions& options, fs::path out) : m_world(world), m_options(options), m_out(std::move(out)) {}
 
-  // Starts the renderer when the world draws; an EGL failure is bad input (exit 2), with the report written.
+  // Starts the render thread when the world draws. It makes the renderer (the EGL context is current on that thread
+  // only) before the first step, so an EGL failure is still found here: bad input (exit 2), with the report written.
+  // Each image goes to the frame writer, when there is one, in frame order.
   void start_renderer() {
     if (!m_world.renders()) return;
-    m_renderer = make_renderer();
+    RenderThread::Factory factory = m_options.renderer_factory;
+    if (!factory) factory = [] { return make_renderer(); };
+    // On the render thread: lower its priority first, so that it and llvmpipe's rasteriser threads (which start with
+    // its context and inherit it) draw with what the simulation leaves of the cores (docs/RESULTS.md, "Frames on a
+    // render thread"). Best effort.
+    RenderThread::Factory lowered = [factory = std::move(factory)] {
+      (void)setpriority(PRIO_PROCESS, id_t(syscall(SYS_gettid)), 19);
+      return factory();
+    };
+    m_render = std::make_unique<RenderThread>(
+        std::move(lowered), [this](long index, Image image) {
+          if (m_writer) m_writer->push(index, std::move(image));
+        },
+        kRenderQueue);
   }
 
   // The whole timeline: the first frame at rest, then steps, frames, surfaces and the progress line.
   void run() {
     const Scene& scene = m_world.scene();
     open_outputs();
-    if (m_renderer) render_frame();
+    if (m_render) render_frame();
     const bool tty = m_options.progress && isatty(STDERR_FILENO);
     auto last_progress = sim::Clock::now();
     m_loop_start = sim::Clock::now();
@@ -78,7 +96,7 @@ class Run {
         std::snprintf(name, sizeof(name), "surface_%06ld.ply", i);
         write_file_atomic(m_out / "surfaces" / name, encode_ply_binary(m_world.deformed_surface(), ply_precision()));
       }
-      if (m_renderer && i % scene.render.every == 0) render_frame();
+      if (m_render && i % scene.render.every == 0) render_frame();
       if (scene.output.contact_forces) append_contact_rows(step.t);
       if (tty && (sim::ms_since(last_progress) > 200.0 || !running())) {
         last_progress = sim::Clock::now();
@@ -93,12 +111,21 @@ class Run {
     if (scene.output.contact_forces)
       write_file_atomic(m_out / "contact_forces.csv",
                         m_contact_csv.empty() ? std::string("t,name,fx,fy,fz,max_penetration_m\n") : m_contact_csv);
-    // Every queued frame is on disk before the run counts as done.
+    // Every queued frame is drawn and on disk before the run counts as done.
+    if (m_render) m_render->finish();
     if (m_writer) m_writer->finish();
   }
 
   // The world's report, with what the loop measured and wrote. A failed run keeps every frame written before.
   Report finish(std::chrono::steady_clock::time_point wall0) {
+    // The render thread first: it may still be handing frames to the writer.
+    if (m_render) {
+      try {
+        m_render->finish();
+      } catch (const std::exception&) {
+        // Already reported through the run's error.
+      }
+    }
     if (m_writer) {
       try {
         m_writer->finish();
@@ -108,15 +135,20 @@ class Run {
     }
     Report report = m_world.report();
     for (std::string& w : m_warnings) report.warnings.push_back(std::move(w));
-    report.subsystems.renderer = m_renderer != nullptr;
+    report.subsystems.renderer = m_render != nullptr;
     report.subsystems.frame_writer = m_writer != nullptr;
     if (m_writer) {
       report.frame_write_ms = TimingSummary::of(m_writer->write_ms());
       report.frames = m_writer->written();
       m_writer.reset();
     }
-    report.render_ms = TimingSummary::of(m_render_ms);
-    report.frames_rendered = long(m_render_ms.size());
+    if (m_render) {
+      const std::vector<double> render_ms = m_render->render_ms();
+      report.render_ms = TimingSummary::of(render_ms);
+      report.frames_rendered = long(render_ms.size());
+      report.render_wait_ms = TimingSummary::of(m_render->wait_ms());
+    }
+    report.snapshot_ms = TimingSummary::of(m_snapshot_ms);
     report.wall_time_s = sim::ms_since(wall0) / 1000.0;
     // The loop's own clock: steps, cuts, frames and surface files, not the loading before the first step.
     if (m_loop_start && report.sim_time_s > 0.0)
@@ -152,7 +184,7 @@ class Run {
       m_warnings.push_back("/output/frames: --no-render given, no frames written");
     if (scene.output.frames && !scene.render.enabled)
       m_warnings.push_back("/output/frames: render.enabled is false, no frames written");
-    if (!m_renderer || !scene.output.frames) return;
+    if (!m_render || !scene.output.frames) return;
     const fs::path frames_dir = m_out / "frames";
     std::error_code ec;
     fs::create_directories(frames_dir, ec);
@@ -160,11 +192,13 @@ class Run {
     m_writer = std::make_unique<FrameWriter>(frames_dir, 4);
   }
 
+  // Takes the frame's snapshot (timed: the simulation waits for it) and queues it for the render thread, which
+  // draws it while the simulation goes on (the wait for room in the queue is timed by the thread).
   void render_frame() {
     const auto t0 = sim::Clock::now();
-    Image image = m_renderer->render(m_world.render_scene());
-    m_render_ms.push_back(sim::ms_since(t0));
-    if (m_writer) m_writer->push(m_frame, std::move(image));
+    RenderScene snapshot = m_world.render_scene();
+    m_snapshot_ms.push_back(sim::ms_since(t0));
+    m_render->push(std::move(snapshot));
     ++m_frame;
   }
 
@@ -193,7 +227,7 @@ class Run {
   void print_progress(const StepResult& step) const {
     const long total = m_options.replay ? m_options.replay->end_step : m_world.total_steps();
     std::fprintf(stderr, "\r[octocut] step %ld/%ld  t = %.4f s  %.2f ms/step", m_world.steps(), total, step.t, step.ms);
-    if (m_renderer) std::fprintf(stderr, "  frame %ld  %.1f ms/frame", m_frame, m_render_ms.back());
+    if (m_render) std::fprintf(stderr, "  frame %ld  %.1f ms/frame", m_frame, m_render->last_render_ms());
     std::fprintf(stderr, "   ");
     if (!running()) std::fprintf(stderr, "\n");
   }
@@ -202,9 +236,13 @@ class Run {
   std::string m_contact_csv;  // contact_forces.csv so far
   const RunOptions& m_options;
   fs::path m_out;
-  std::unique_ptr<Renderer> m_renderer;
+  // Snapshots queued for the render thread at most: memory stays bounded, and a renderer slower than the simulation
+  // makes the simulation wait rather than fall behind without limit.
+  static constexpr std::size_t kRenderQueue = 2;
+  // Declaration order matters: the render thread (whose sink pushes into the writer) goes before the writer.
   std::unique_ptr<FrameWriter> m_writer;
-  std::vector<double> m_render_ms;
+  std::unique_ptr<RenderThread> m_render;
+  std::vector<double> m_snapshot_ms;  // per frame, the snapshot's cost on the simulation thread, ms
   std::optional<std::chrono::steady_clock::time_point> m_loop_start;  // when the first step began
   std::vector<std::string> m_warnings;
   long m_frame = 0;

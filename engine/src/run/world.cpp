@@ -639,6 +639,7 @@ RenderScene World::render_scene() const {
     const sim::Pose pose = sim::interpolate_pose(m->props[i].keyframes, t);
     RenderMesh mesh = m->props[i].mesh;
     mesh.model = pose.matrix().cast<float>();
+    mesh.still = m->props[i].keyframes.size() <= 1;  // a fixed pose
     rs.meshes.push_back(std::move(mesh));
     if (scene.render.props[i].name == scene.render.camera.follow_tool) follow_tool(rs.camera, pose.position);
   }

@@ -29,6 +29,10 @@ struct RenderMesh {
   /// Skip triangles seen from behind: right for closed, outward-oriented meshes; false for open ones, which are then
   /// lit on both sides.
   bool cull_back_faces = true;
+  /// The same in every frame (a prop without keyframes: same vertices, same transform). A renderer may keep what it
+  /// drew of such meshes and reuse it while they, the camera, the lights and the image size stay as they were (it
+  /// compares them; the flag only says which meshes are worth keeping).
+  bool still = false;
 };
 
 /// A point light. The first light of an arthroscope camera sits at the lens.

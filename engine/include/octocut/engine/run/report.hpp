@@ -112,6 +112,9 @@ struct Report {
   /// not the loading before the first step). 1 or more keeps up with the clock; 0 when no step ran.
   double realtime_factor = 0.0;
   TimingSummary step_ms, render_ms, frame_write_ms;
+  /// Per frame: World::render_scene() on the simulation thread (the snapshot the render thread draws), and the time
+  /// the simulation waited for room in the render thread's queue, ms (zero summaries when nothing rendered).
+  TimingSummary snapshot_ms, render_wait_ms;
   long frames_rendered = 0;  ///< frames the renderer drew
   long frames = 0;           ///< frames written to frames/ (PNG)
   long elements = 0, dofs = 0, hanging_slots = 0, tets = 0, surface_vertices = 0, surface_triangles = 0;

@@ -1,9 +1,12 @@
 #pragma once
 // `octocut run` (SPEC §5, §8): a thin loop over engine::World that adds what a headless run writes: the renderer and
 // the frame writer, the surfaces asked for by `output`, the progress line, and report.json.
+#include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
+#include "octocut/engine/render/renderer.hpp"
 #include "octocut/engine/run/report.hpp"
 #include "octocut/engine/run/session.hpp"
 #include "octocut/engine/scene/scene.hpp"
@@ -19,6 +22,9 @@ struct RunOptions {
   /// scene's timeline: its events at the steps they took effect, until its end_step, whatever the scene's duration.
   /// The world is built cuttable, as the viewer's was. Null: run the timeline.
   const Session* replay = nullptr;
+  /// Makes the renderer, on the render thread; empty: make_renderer() (headless EGL). A seam for tests, which inject
+  /// renderers that fail part-way.
+  std::function<std::unique_ptr<Renderer>()> renderer_factory;
 };
 
 /// What a run ended with.

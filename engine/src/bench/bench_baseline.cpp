@@ -18,6 +18,7 @@ using json = nlohmann::ordered_json;
 using schema::join_pointer;
 
 constexpr const char* kSchema = "octocut.cut_baseline/1";
+constexpr const auto& kBaselineKeys = kCutBaselineKeys;
 constexpr double kMaxTolerance = 10.0;
 constexpr double kMaxSlackMs = 1000.0;
 
@@ -29,12 +30,12 @@ constexpr double kMaxSlackMs = 1000.0;
 const schema::Entry& baseline_schema() {
   using namespace schema;
   static const Entry entry = [] {
-    std::vector<std::string> stages(kCutStageKeys.begin(), kCutStageKeys.end());
+    std::vector<std::string> stages(kBaselineKeys.begin(), kBaselineKeys.end());
     Entry benchmarks = object_array(
         "benchmarks",
         {required(string("name", "The cut benchmark, \"cut/<scene>\".")),
          required(integer("cuts_ok", std::nullopt, closed(1, 1e9), "Ok cuts the medians are taken over.")),
-         required(number_map("ms", stages, closed(0, 1e9), 1, "Median ms of each stage on the baseline machine."))},
+         required(number_map("ms", stages, closed(0, 1e9), 1, "Median ms of each stage, and of the latency (the cut plus the first step after it), on the baseline machine."))},
         "The benchmarks and their stage medians.");
     benchmarks = required(benchmarks);
     benchmarks.min_items = 1;
@@ -102,8 +103,8 @@ CutBaseline parse_cut_baseline(const std::string& text, const std::string& file)
     if (!bm.name.starts_with("cut/")) bad(file, at + "/name", "expected the name of a cut benchmark (\"cut/...\")");
     if (!names.insert(bm.name).second) bad(file, at + "/name", "benchmark '" + bm.name + "' listed twice");
     bm.cuts_ok = static_cast<long>(e["cuts_ok"].get<std::int64_t>());
-    // Stages in the report's order (the schema allows only these names).
-    for (const char* stage : kCutStageKeys)
+    // Stages in the report's order, then the latency (the schema allows only these names).
+    for (const char* stage : kBaselineKeys)
       if (e["ms"].contains(stage)) bm.stages.push_back({stage, e["ms"][stage].get<double>()});
     b.benchmarks.push_back(std::move(bm));
   }
@@ -133,7 +134,7 @@ std::string make_cut_baseline(const std::string& bench_json, double tolerance, d
     const long ok = b.contains("params") ? b["params"].value("ok", 0L) : 0L;
     if (ok < 1) throw std::invalid_argument(name + ": no ok cut to take a baseline from");
     json ms = json::object();
-    for (const char* k : kCutStageKeys) {
+    for (const char* k : kBaselineKeys) {
       const std::string key = std::string(k) + "_ms";
       if (!b.contains("metrics") || !b["metrics"].contains(key) || !b["metrics"][key].is_number())
         throw std::invalid_argument(name + ": the results lack metrics/" + key);

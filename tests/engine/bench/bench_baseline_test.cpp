@@ -20,9 +20,9 @@ using json = nlohmann::ordered_json;
 // An octocut.bench/1 document with one cut benchmark: stage k takes (k + 1) * unit_ms, total 10 * unit_ms.
 json bench_doc(double calibration_ms, double unit_ms, long ok = 6, const std::string& name = "cut/demo") {
   json metrics = json::object();
-  for (std::size_t k = 0; k < kCutStageKeys.size(); ++k) {
-    const std::string key = std::string(kCutStageKeys[k]) + "_ms";
-    metrics[key] = std::string(kCutStageKeys[k]) == "total" ? 10.0 * unit_ms : double(k + 1) * unit_ms;
+  for (std::size_t k = 0; k < kCutBaselineKeys.size(); ++k) {
+    const std::string key = std::string(kCutBaselineKeys[k]) + "_ms";
+    metrics[key] = std::string(kCutBaselineKeys[k]) == "total" ? 10.0 * unit_ms : double(k + 1) * unit_ms;
   }
   metrics["elements_after"] = 100;
   json doc;
@@ -52,10 +52,13 @@ TEST(CutBaseline, MadeFromResultsHoldsTheirCutStagesAndCalibration) {
   ASSERT_EQ(b.benchmarks.size(), 1u);  // the step benchmark is not a cut benchmark
   EXPECT_EQ(b.benchmarks[0].name, "cut/demo");
   EXPECT_EQ(b.benchmarks[0].cuts_ok, 6);
-  ASSERT_EQ(b.benchmarks[0].stages.size(), kCutStageKeys.size());
+  ASSERT_EQ(b.benchmarks[0].stages.size(), kCutBaselineKeys.size());
   EXPECT_EQ(b.benchmarks[0].stages[1].name, "surface");
   EXPECT_EQ(b.benchmarks[0].stages[1].ms, 1.0);
-  EXPECT_EQ(b.benchmarks[0].stages.back().ms, 5.0);
+  EXPECT_EQ(b.benchmarks[0].stages[kCutStageKeys.size() - 1].name, "total");
+  EXPECT_EQ(b.benchmarks[0].stages[kCutStageKeys.size() - 1].ms, 5.0);
+  EXPECT_EQ(b.benchmarks[0].stages.back().name, "latency");
+  EXPECT_EQ(b.benchmarks[0].stages.back().ms, 4.5);
 }
 
 TEST(CutBaseline, TheSameRunOnAFasterOrSlowerMachineIsNoRegression) {
@@ -65,7 +68,7 @@ TEST(CutBaseline, TheSameRunOnAFasterOrSlowerMachineIsNoRegression) {
     const BaselineComparison c = compare_cut_baseline(bench_doc(4.0 * k, 0.5 * k).dump(), b);
     EXPECT_NEAR(c.scale, k, 1e-15);
     EXPECT_TRUE(c.ok()) << "k = " << k << ": " << (c.problems.empty() ? "" : c.problems[0]);
-    ASSERT_EQ(c.rows.size(), kCutStageKeys.size());
+    ASSERT_EQ(c.rows.size(), kCutBaselineKeys.size());
     for (const BaselineRow& r : c.rows) EXPECT_NEAR(r.expected_ms, r.measured_ms, 1e-12 * r.measured_ms);
   }
 }
@@ -189,12 +192,12 @@ TEST(CutBaseline, TheComparisonGoesIntoTheResultsDocument) {
   const CutBaseline b = baseline_from(bench_doc(4.0, 0.5), 0.0, 0.0);
   const std::string now = bench_doc(4.0, 0.6).dump();  // every stage 20 % slower
   const BaselineComparison c = compare_cut_baseline(now, b);
-  EXPECT_EQ(c.problems.size(), kCutStageKeys.size());
+  EXPECT_EQ(c.problems.size(), kCutBaselineKeys.size());
   const json doc = json::parse(with_baseline_comparison(now, c, "base.json"));
   EXPECT_EQ(doc["schema"], "octocut.bench/1");
   EXPECT_EQ(doc["baseline"]["file"], "base.json");
   EXPECT_EQ(doc["baseline"]["status"], "regressed");
-  EXPECT_EQ(doc["baseline"]["rows"].size(), kCutStageKeys.size());
+  EXPECT_EQ(doc["baseline"]["rows"].size(), kCutBaselineKeys.size());
   EXPECT_DOUBLE_EQ(doc["baseline"]["rows"][1]["measured_ms"].get<double>(), 1.2);
   EXPECT_NE(baseline_comparison_table(c).find("REGRESSED"), std::string::npos);
 }

@@ -6,13 +6,23 @@
 // Baseline file (schema octocut.cut_baseline/1, JSON):
 //   {schema, machine {cpu, threads, calibration_ms}, tolerance, slack_ms,
 //    benchmarks: [ {name, cuts_ok, ms {back_transform, surface, material_graph, refine, node_split, embedding,
-//                                      solver_update, total}} ]}
+//                                      solver_update, total, latency}} ]}
 // A stage regresses when its median is above  scale * (baseline_ms * (1 + tolerance) + slack_ms), with
 // scale = calibration_ms of this run / calibration_ms of the baseline.
+#include <array>
 #include <string>
 #include <vector>
 
+#include "octocut/engine/run/report.hpp"
+
 namespace octocut::engine {
+
+/// What a cut baseline holds per cut benchmark: the stages of a cut and its total (kCutStageKeys), then the latency
+/// (the cut plus the first step after it). Each is a `<key>_ms` metric of the cut benchmark. A baseline without a
+/// latency compares the stages only.
+inline constexpr std::array<const char*, kCutStageKeys.size() + 1> kCutBaselineKeys = {
+    kCutStageKeys[0], kCutStageKeys[1], kCutStageKeys[2], kCutStageKeys[3], kCutStageKeys[4],
+    kCutStageKeys[5], kCutStageKeys[6], kCutStageKeys[7], "latency"};
 
 /// A parsed, checked baseline.
 struct CutBaseline {

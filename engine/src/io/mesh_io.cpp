@@ -1,9 +1,11 @@
 // Mesh files (SPEC §2.4): import through assimp, deterministic welding, validation, and export by extension.
 // assimp is confined to this file.
+#include <assimp/BaseImporter.h>
 #include <assimp/DefaultLogger.hpp>
 #include <assimp/Exporter.hpp>
 #include <assimp/Importer.hpp>
 #include <assimp/LogStream.hpp>
+#include <assimp/importerdesc.h>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 
@@ -475,9 +477,35 @@ LoadedMesh load_mesh(const fs::path& path, const MeshLoadOptions& options) {
   return loaded;
 }
 
+namespace {
+// Leaves `importer` with only the importers that claim the file's extension, and returns the others (to delete once
+// the import is done). Assimp tries every other importer on a file that its own refuses, and some of those crash on
+// hostile input: fuzzing found its binary PLY reader reading out of bounds on a PLY file named .gltf.
+std::vector<std::unique_ptr<Assimp::BaseImporter>> keep_importers_of(Assimp::Importer& importer, const std::string& ext) {
+  std::vector<std::unique_ptr<Assimp::BaseImporter>> dropped;
+  const std::string want = ext.substr(1);  // without the dot
+  for (std::size_t i = importer.GetImporterCount(); i-- > 0;) {
+    const aiImporterDesc* desc = importer.GetImporterInfo(i);
+    bool claims = false;
+    if (desc != nullptr && desc->mFileExtensions != nullptr) {
+      const std::string list = std::string(" ") + desc->mFileExtensions + " ";
+      claims = list.find(" " + want + " ") != std::string::npos;
+    }
+    if (claims) continue;
+    Assimp::BaseImporter* other = importer.GetImporter(i);
+    if (other != nullptr && importer.UnregisterLoader(other) == aiReturn_SUCCESS) dropped.emplace_back(other);
+  }
+  return dropped;
+}
+}  // namespace
+
 void read_with_assimp(const fs::path& path, const std::string& file, std::vector<sim::Vec3>& positions,
                       std::vector<std::array<int64_t, 3>>& triangles) {
+  const std::string ext = lower_extension(path);
+  if (ext != ".obj" && ext != ".stl" && ext != ".off" && ext != ".gltf" && ext != ".glb")
+    throw MeshError(file + ": unsupported mesh format '" + ext + "' (use .ply, .obj, .stl, .off, .gltf or .glb)");
   Assimp::Importer importer;
+  const std::vector<std::unique_ptr<Assimp::BaseImporter>> others = keep_importers_of(importer, ext);
   const CaptureImportErrors errors;
   const aiScene* scene = importer.ReadFile(file, aiProcess_Triangulate | aiProcess_ValidateDataStructure);
   if (scene == nullptr) {

@@ -157,6 +157,35 @@ TEST_F(MeshIoTest, ReadsInlineOff) {
   expect_same_vertex_set({{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}}, loaded.mesh.vertices, 0.0);
 }
 
+// A file is read only by the importers of its own extension: a valid OFF or ASCII PLY mesh named .gltf or .stl is
+// refused with the file's name (assimp would otherwise try all its other importers on it, some of which crash on
+// hostile input), and an extension octocut does not read is refused before any importer runs.
+TEST_F(MeshIoTest, AFileIsReadOnlyAsTheFormatItsExtensionNames) {
+  const std::string ply =
+      "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+      "element face 4\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n"
+      "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+  EXPECT_EQ(load_mesh(write("tetra.ply", ply)).mesh.num_triangles(), 4u);
+  EXPECT_EQ(load_mesh(write("tetra.off", kTetraOff)).mesh.num_triangles(), 4u);
+  const std::string off = kTetraOff;
+  for (const auto& [name, text] : {std::pair<std::string, std::string>{"disguised.gltf", ply},
+                                   {"disguised.stl", off}, {"disguised2.gltf", off}}) {
+    const fs::path file = write(name, text);
+    try {
+      (void)load_mesh(file);
+      ADD_FAILURE() << name << " was read";
+    } catch (const MeshError& e) {
+      EXPECT_NE(std::string(e.what()).find(file.string()), std::string::npos) << e.what();
+    }
+  }
+  try {
+    (void)load_mesh(write("tetra.3ds", kTetraOff));
+    ADD_FAILURE() << ".3ds was read";
+  } catch (const MeshError& e) {
+    EXPECT_NE(std::string(e.what()).find("unsupported mesh format '.3ds'"), std::string::npos) << e.what();
+  }
+}
+
 TEST_F(MeshIoTest, ReadsInlineObjWithQuadsAndTriangulatesThem) {
   // A unit cube of six quads (outward counter-clockwise), written with a comment and a group.
   const std::string obj =
@@ -498,10 +527,11 @@ TEST_F(MeshIoTest, MissingEmptyAndGarbageFilesAreClearErrors) {
   std::string garbage(4096, '\0');
   for (char& c : garbage) c = static_cast<char>(random() & 0xFF);
   for (const std::string name :
-       {"garbage.bin", "garbage.ply", "garbage.glb", "garbage.gltf", "garbage.stl", "garbage.obj", "garbage.off"}) {
+       {"garbage.ply", "garbage.glb", "garbage.gltf", "garbage.stl", "garbage.obj", "garbage.off"}) {
     const std::string message = load_error(write(name, garbage));
     EXPECT_TRUE(has(message, name + ": cannot read mesh (unknown format or corrupt file): ")) << message;
   }
+  EXPECT_TRUE(has(load_error(write("garbage.bin", garbage)), "garbage.bin: unsupported mesh format '.bin'"));
 }
 
 TEST_F(MeshIoTest, IndicesThatTheImporterWouldRepairAreErrors) {

@@ -728,6 +728,7 @@ SurfaceCut surface_stage(SurfaceEditor& editor, const CutObject& object, const s
     const SurfaceEditResult r = cut_with_blade(editor, model, rest, k, sopt, cut, out);
     if (r.status == SurfaceCutStatus::no_op) continue;
     out.removed_volume += r.removed_volume;
+    out.collapses += r.collapses;
     if (r.new_triangles > 0) {
       const bool first = out.new_triangles == 0;
       out.min_angle_deg = first ? r.min_angle_deg : std::min(out.min_angle_deg, r.min_angle_deg);

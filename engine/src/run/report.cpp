@@ -70,6 +70,8 @@ std::string report_json(const Report& r) {
                          {"leaves_refined", c.leaves_refined},
                          {"fragments_removed", c.fragments_removed},
                          {"fragment_volume_m3", num(c.fragment_volume_m3)},
+                         {"snapped", c.snapped},
+                         {"collapses", c.collapses},
                          {"new_triangles", c.new_triangles},
                          {"min_angle_deg", c.new_triangles > 0 ? num(c.min_angle_deg) : ojson(nullptr)},
                          {"min_edge_m", c.new_triangles > 0 ? num(c.min_edge_m) : ojson(nullptr)},

@@ -383,6 +383,8 @@ CutSummary World::Impl::cut(std::size_t i, double t, bool scheduled) {
   c.leaves_refined = o.leaves_refined;
   c.fragments_removed = o.fragments_removed;
   c.fragment_volume_m3 = o.fragment_volume;
+  c.snapped = o.snapped;
+  c.collapses = o.collapses;
   c.new_triangles = o.new_triangles;
   c.min_angle_deg = o.min_angle_deg;
   c.min_edge_m = o.min_edge;

@@ -290,5 +290,23 @@ TEST_F(WorldTest, RunSceneIsTheSameLoopOverWorld) {
   EXPECT_NE(text.find("\"octocut_version\""), std::string::npos);
 }
 
+// The 20-punch slab: the first punch has no earlier cut to snap to; every re-punch at the same spot (the slab sags a
+// little between them) lands within cutting.min_feature of the first one's walls, so the report counts at least one
+// blade that snapped onto it (issue 18: near-coincident walls snap together).
+TEST(WorldReport, RePunchesReportTheirSnappedBlades) {
+  const Scene scene = load_scene(std::string(OCTOCUT_SOURCE_DIR) + "/assets/scenes/slab_punch_20.json",
+                                 {"/duration=0.025"});
+  World world(scene, WorldOptions{false});
+  while (!world.done()) world.step();
+  const Report report = world.report();
+  ASSERT_GE(report.cuts.size(), 5u);
+  EXPECT_EQ(report.cuts[0].status, "ok");
+  EXPECT_EQ(report.cuts[0].snapped, 0);
+  for (std::size_t k = 1; k < report.cuts.size(); ++k) {
+    EXPECT_NE(report.cuts[k].status, "skipped") << "cut " << k;
+    EXPECT_GE(report.cuts[k].snapped, 1) << "cut " << k;
+  }
+}
+
 }  // namespace
 }  // namespace octocut::engine

@@ -117,6 +117,7 @@ struct CutOutcome {
                                       ///< (near-coincident walls snap together: snap_target)
   int unrestricted = 0;               ///< of the restricted components, those whose restricted boolean could not be
                                       ///< closed up: their blade cut all the material under it
+  int collapses = 0;                  ///< edge collapses of the rounding repair (what rounding to doubles broke)
   int new_triangles = 0;              ///< triangles the surface boolean made (pieces of cut faces and of the blades)
   double min_angle_deg = 0.0;         ///< smallest interior angle among them, degrees (0 when none)
   double min_edge = 0.0;              ///< shortest edge among them, m (0 when none)

@@ -16,6 +16,7 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <new>
 #include <numeric>
 #include <optional>
 #include <stdexcept>
@@ -499,15 +500,65 @@ std::vector<std::unique_ptr<Assimp::BaseImporter>> keep_importers_of(Assimp::Imp
 }
 }  // namespace
 
+namespace {
+// An OFF file's header counts against its size: assimp allocates the declared vertices and faces before it reads
+// them, so a header that declares billions made it ask for tens of gigabytes (found by the mesh fuzzer). Every vertex
+// takes at least 6 bytes ("0 0 0\n") and every face at least 8 ("3 0 1 2\n"); throws when the file is too short.
+void check_off_counts(const fs::path& path, const std::string& file) {
+  const std::string text = read_file(path);
+  std::size_t at = 0;
+  std::vector<std::string> words;  // the magic and the counts, comments and blank space skipped
+  while (at < text.size() && words.size() < 4) {
+    if (text[at] == '#') {
+      while (at < text.size() && text[at] != '\n') ++at;
+      continue;
+    }
+    if (std::isspace(static_cast<unsigned char>(text[at]))) {
+      ++at;
+      continue;
+    }
+    std::size_t end = at;
+    while (end < text.size() && !std::isspace(static_cast<unsigned char>(text[end])) && text[end] != '#') ++end;
+    std::string word = text.substr(at, end - at);
+    // "OFF" may be glued to the counts' line or stand alone; "OFF3 4 ..." is not a form octocut reads anyway.
+    words.push_back(std::move(word));
+    at = end;
+  }
+  if (words.empty() || words[0].find("OFF") == std::string::npos) return;  // not OFF: assimp says what it is
+  long double needed = 0.0L;
+  for (std::size_t k = 1; k < 3 && k < words.size(); ++k) {
+    long double count = 0.0L;
+    const char* b = words[k].data();
+    const char* e = b + words[k].size();
+    std::uint64_t n = 0;
+    const auto [ptr, ec] = std::from_chars(b, e, n);
+    if (ec == std::errc::result_out_of_range) count = 1e30L;
+    else if (ec == std::errc() && ptr == e) count = static_cast<long double>(n);
+    else return;  // not a count: assimp reports the malformed header
+    needed += count * (k == 1 ? 6.0L : 8.0L);
+  }
+  if (needed > static_cast<long double>(text.size()))
+    throw MeshError(file + ": malformed mesh: the OFF header declares " + words[1] + " vertices and " +
+                    (words.size() > 2 ? words[2] : std::string("?")) + " faces, more than its " +
+                    std::to_string(text.size()) + " bytes can hold");
+}
+}  // namespace
+
 void read_with_assimp(const fs::path& path, const std::string& file, std::vector<sim::Vec3>& positions,
                       std::vector<std::array<int64_t, 3>>& triangles) {
   const std::string ext = lower_extension(path);
+  if (ext == ".off") check_off_counts(path, file);
   if (ext != ".obj" && ext != ".stl" && ext != ".off" && ext != ".gltf" && ext != ".glb")
     throw MeshError(file + ": unsupported mesh format '" + ext + "' (use .ply, .obj, .stl, .off, .gltf or .glb)");
   Assimp::Importer importer;
   const std::vector<std::unique_ptr<Assimp::BaseImporter>> others = keep_importers_of(importer, ext);
   const CaptureImportErrors errors;
-  const aiScene* scene = importer.ReadFile(file, aiProcess_Triangulate | aiProcess_ValidateDataStructure);
+  const aiScene* scene = nullptr;
+  try {
+    scene = importer.ReadFile(file, aiProcess_Triangulate | aiProcess_ValidateDataStructure);
+  } catch (const std::bad_alloc&) {
+    throw MeshError(file + ": cannot read mesh: it declares more data than memory holds");
+  }
   if (scene == nullptr) {
     throw MeshError(file + ": cannot read mesh (unknown format or corrupt file): " + importer.GetErrorString());
   }

@@ -114,7 +114,7 @@ std::filesystem::path frame_path(const std::filesystem::path& dir, long index) {
 }
 
 FrameWriter::FrameWriter(std::filesystem::path dir, std::size_t capacity, Hook before_write)
-    : m_dir(std::move(dir)), m_capacity(capacity == 0 ? 1 : capacity), m_before_write(std::move(before_write)) {
+    : m_dir(std::move(dir)), m_queue(capacity), m_before_write(std::move(before_write)) {
   m_thread = std::thread([this] { run(); });
 }
 
@@ -127,28 +127,17 @@ FrameWriter::~FrameWriter() {
 }
 
 void FrameWriter::push(long index, Image image) {
-  std::unique_lock lock(m_mutex);
   // Backpressure: wait for room, unless the writer has failed or stopped.
-  const auto t0 = Clock::now();
-  m_not_full.wait(lock, [&] { return m_queue.size() < m_capacity || m_error || m_stop; });
-  m_blocked_ms += sim::ms_since(t0);
-  if (m_error) std::rethrow_exception(m_error);
-  if (m_stop) throw std::logic_error("FrameWriter::push after finish");
-  m_queue.push_back({index, std::move(image)});
-  m_not_empty.notify_one();
+  const double waited = m_queue.push({index, std::move(image)}, "FrameWriter");
+  std::lock_guard lock(m_mutex);
+  m_blocked_ms += waited;
 }
 
 void FrameWriter::finish() {
   // Stop accepting frames and let the thread drain the queue.
-  {
-    std::lock_guard lock(m_mutex);
-    m_stop = true;
-  }
-  m_not_empty.notify_all();
-  m_not_full.notify_all();
+  m_queue.close();
   if (m_thread.joinable()) m_thread.join();
-  std::lock_guard lock(m_mutex);
-  if (m_error) std::rethrow_exception(m_error);
+  if (const std::exception_ptr error = m_queue.error()) std::rethrow_exception(error);
 }
 
 long FrameWriter::written() const {
@@ -169,15 +158,9 @@ double FrameWriter::blocked_ms() const {
 void FrameWriter::run() {
   for (;;) {
     // Take the oldest frame, or leave when stopped and drained.
-    Job job;
-    {
-      std::unique_lock lock(m_mutex);
-      m_not_empty.wait(lock, [&] { return !m_queue.empty() || m_stop; });
-      if (m_queue.empty()) return;
-      job = std::move(m_queue.front());
-      m_queue.pop_front();
-    }
-    m_not_full.notify_one();
+    std::optional<Job> next = m_queue.pop();
+    if (!next) return;
+    Job& job = *next;
 
     // Encode and write atomically; the first failure ends the writer and drops the rest of the queue.
     try {
@@ -189,11 +172,8 @@ void FrameWriter::run() {
       ++m_written;
       m_write_ms.push_back(ms);
     } catch (const std::exception& e) {
-      std::lock_guard lock(m_mutex);
-      m_error = std::make_exception_ptr(std::runtime_error(frame_path(m_dir, job.index).string() +
-                                                           ": cannot write the frame: " + e.what()));
-      m_queue.clear();
-      m_not_full.notify_all();
+      m_queue.fail(std::make_exception_ptr(
+          std::runtime_error(frame_path(m_dir, job.index).string() + ": cannot write the frame: " + e.what())));
       return;
     }
   }

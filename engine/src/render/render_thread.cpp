@@ -1,5 +1,6 @@
 #include "octocut/engine/render/render_thread.hpp"
 
+#include <optional>
 #include <utility>
 
 #include "octocut/sim/timing.hpp"
@@ -7,13 +8,13 @@
 namespace octocut::engine {
 
 RenderThread::RenderThread(Factory make, Sink sink, std::size_t capacity)
-    : m_sink(std::move(sink)), m_capacity(capacity == 0 ? 1 : capacity) {
+    : m_sink(std::move(sink)), m_queue(capacity) {
   m_thread = std::thread([this, make = std::move(make)]() mutable { run(std::move(make)); });
   // The renderer is made on the thread: wait for it, so that a failure to start is the caller's, before any frame.
   std::unique_lock lock(m_mutex);
   m_started_cv.wait(lock, [&] { return m_started; });
-  if (m_error) {
-    const std::exception_ptr error = m_error;
+  if (m_start_error) {
+    const std::exception_ptr error = m_start_error;
     lock.unlock();
     m_thread.join();
     std::rethrow_exception(error);
@@ -29,27 +30,16 @@ RenderThread::~RenderThread() {
 }
 
 void RenderThread::push(RenderScene scene) {
-  std::unique_lock lock(m_mutex);
   // Backpressure: wait for room, unless the thread has failed or stopped.
-  const auto t0 = sim::Clock::now();
-  m_not_full.wait(lock, [&] { return m_queue.size() < m_capacity || m_error || m_stop; });
-  m_wait_ms.push_back(sim::ms_since(t0));
-  if (m_error) std::rethrow_exception(m_error);
-  if (m_stop) throw std::logic_error("RenderThread::push after finish");
-  m_queue.push_back(std::move(scene));
-  m_not_empty.notify_one();
+  const double waited = m_queue.push(std::move(scene), "RenderThread");
+  std::lock_guard lock(m_mutex);
+  m_wait_ms.push_back(waited);
 }
 
 void RenderThread::finish() {
-  {
-    std::lock_guard lock(m_mutex);
-    m_stop = true;
-  }
-  m_not_empty.notify_all();
-  m_not_full.notify_all();
+  m_queue.close();
   if (m_thread.joinable()) m_thread.join();
-  std::lock_guard lock(m_mutex);
-  if (m_error) std::rethrow_exception(m_error);
+  if (const std::exception_ptr error = m_queue.error()) std::rethrow_exception(error);
 }
 
 std::vector<double> RenderThread::render_ms() const {
@@ -72,13 +62,6 @@ std::string RenderThread::description() const {
   return m_description;
 }
 
-void RenderThread::fail(std::exception_ptr error) {
-  std::lock_guard lock(m_mutex);
-  if (!m_error) m_error = std::move(error);
-  m_queue.clear();
-  m_not_full.notify_all();
-}
-
 void RenderThread::run(Factory make) {
   // The renderer lives and dies on this thread: its GL context is current here only.
   std::unique_ptr<Renderer> renderer;
@@ -90,7 +73,7 @@ void RenderThread::run(Factory make) {
     m_started = true;
   } catch (...) {
     std::lock_guard lock(m_mutex);
-    m_error = std::current_exception();
+    m_start_error = std::current_exception();
     m_started = true;
   }
   m_started_cv.notify_all();
@@ -98,15 +81,9 @@ void RenderThread::run(Factory make) {
 
   for (long index = 0;; ++index) {
     // The oldest snapshot, or leave when stopped and drained.
-    RenderScene scene;
-    {
-      std::unique_lock lock(m_mutex);
-      m_not_empty.wait(lock, [&] { return !m_queue.empty() || m_stop || m_error; });
-      if (m_queue.empty() || m_error) return;
-      scene = std::move(m_queue.front());
-      m_queue.pop_front();
-    }
-    m_not_full.notify_one();
+    std::optional<RenderScene> next = m_queue.pop();
+    if (!next) return;
+    const RenderScene scene = std::move(*next);
     // Draw, then hand the image on; the first failure ends the thread and drops the rest of the queue.
     try {
       const auto t0 = sim::Clock::now();
@@ -118,7 +95,7 @@ void RenderThread::run(Factory make) {
       }
       if (m_sink) m_sink(index, std::move(image));
     } catch (...) {
-      fail(std::current_exception());
+      m_queue.fail(std::current_exception());
       return;
     }
   }

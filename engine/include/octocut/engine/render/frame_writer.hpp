@@ -1,8 +1,6 @@
 #pragma once
 // The frame writer (SPEC §6): PNG frames written by a background thread so that encoding overlaps the simulation.
-#include <condition_variable>
 #include <cstdint>
-#include <deque>
 #include <exception>
 #include <filesystem>
 #include <functional>
@@ -11,6 +9,7 @@
 #include <thread>
 #include <vector>
 
+#include "octocut/engine/render/bounded_queue.hpp"
 #include "octocut/engine/render/render_scene.hpp"
 
 namespace octocut::engine {
@@ -64,13 +63,9 @@ class FrameWriter {
     Image image;
   };
   std::filesystem::path m_dir;
-  std::size_t m_capacity;
+  BoundedQueue<Job> m_queue;         ///< frames waiting to be written
   Hook m_before_write;
-  mutable std::mutex m_mutex;
-  std::condition_variable m_not_full, m_not_empty;
-  std::deque<Job> m_queue;           ///< frames waiting to be written (<= m_capacity)
-  bool m_stop = false;               ///< no more frames will come
-  std::exception_ptr m_error;        ///< the first failure
+  mutable std::mutex m_mutex;        ///< guards what follows
   long m_written = 0;
   std::vector<double> m_write_ms;    ///< per written frame, ms
   double m_blocked_ms = 0.0;

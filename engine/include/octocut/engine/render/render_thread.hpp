@@ -5,7 +5,6 @@
 // image to a sink (the frame writer). GL-free: any Renderer will do.
 #include <condition_variable>
 #include <cstddef>
-#include <deque>
 #include <exception>
 #include <functional>
 #include <memory>
@@ -14,6 +13,7 @@
 #include <thread>
 #include <vector>
 
+#include "octocut/engine/render/bounded_queue.hpp"
 #include "octocut/engine/render/render_scene.hpp"
 #include "octocut/engine/render/renderer.hpp"
 
@@ -57,16 +57,13 @@ class RenderThread {
 
  private:
   void run(Factory make);
-  void fail(std::exception_ptr error);
 
   Sink m_sink;
-  std::size_t m_capacity;
-  mutable std::mutex m_mutex;
-  std::condition_variable m_not_full, m_not_empty, m_started_cv;
-  std::deque<RenderScene> m_queue;  ///< snapshots waiting to be drawn (<= m_capacity)
+  BoundedQueue<RenderScene> m_queue;  ///< snapshots waiting to be drawn
+  mutable std::mutex m_mutex;         ///< guards what follows
+  std::condition_variable m_started_cv;
   bool m_started = false;           ///< the renderer was made, or making it failed
-  bool m_stop = false;              ///< no more snapshots will come
-  std::exception_ptr m_error;       ///< the first failure
+  std::exception_ptr m_start_error; ///< why making it failed
   std::vector<double> m_render_ms;  ///< per drawn frame, ms
   std::vector<double> m_wait_ms;    ///< per push, ms
   std::string m_description;

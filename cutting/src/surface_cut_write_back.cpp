@@ -259,6 +259,7 @@ WrittenPatch write_back(SurfaceEditor& editor, const ChangingFaces& changing, co
     if (!whole[i]) volume_before += tet_volume(centre, surface, old_tris[i]);
   }
   WrittenPatch written;
+  written.intersections_checked = repair;
   if (boundary_edges) written.boundary_edges = boundary_edges_of(old_tris);
 
   // From here on S is edited in place (the caller rolls the edits back when a later step throws). New vertices are

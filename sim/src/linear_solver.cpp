@@ -107,6 +107,11 @@ class CholmodFactor {
     }
     return ok;
   }
+  /// Forgets the analysis and the factor (analyzed() is false after).
+  void clear() {
+    free_factor();
+    m_factor_flops = m_factor_entries = 0.0;
+  }
   /// Keeps a single-precision copy of each factor for solve_single.
   void keep_single(bool keep) { m_keep_single = keep; }
   /// x = (L L^T)^-1 b (in A's ordering) with the single-precision copy of the last factor, in double arithmetic:
@@ -404,6 +409,8 @@ class CutBridge {
  public:
   CutBridge(std::unique_ptr<CholmodFactor> factor, SpMat transfer)
       : m_factor(std::move(factor)), m_transfer(std::move(transfer)) {}
+  /// The old revision's factor (its operation counts price the new pattern's first factor until that is analysed).
+  [[nodiscard]] const CholmodFactor& old_factor() const { return *m_factor; }
   /// Prepares for A (3 x 3 blocked, new DOFs as T's rows). False when it cannot: then nothing uses it.
   bool build(const SpMat& A) {
     const Eigen::Index nb = A.rows() / 3;
@@ -538,11 +545,18 @@ class PcgSolver final : public LinearSolver {
   PcgSolver(const PcgSolver&) = delete;
   PcgSolver& operator=(const PcgSolver&) = delete;
 
+  // With factor_lag_solves > 0 the analysis is left to the first factorisation that needs it: after a cut that is
+  // the background one the bridge starts (so the ordering of the new pattern, 2-3 ms on the 50k meniscus, leaves the
+  // cut's critical path); a factorisation made at once (the first step, or when no bridge can be built) analyses
+  // first.
   void analyze_pattern(const SpMat& A) override {
     drop_pending();
     if (m_use_cholesky) {
       m_front->keep_single(m_single);
-      m_front->analyze(A);
+      if (m_opt.factor_lag_solves > 0)
+        m_front->clear();
+      else
+        m_front->analyze(A);
       m_back.reset();  // a spare is analysed in the background, when first needed
     }
     m_have_factor = false;
@@ -636,12 +650,23 @@ class PcgSolver final : public LinearSolver {
     return true;
   }
 
-  // Factorises the current matrix now, into the front factor (BLAS at m_opt.threads). Drops a background refresh
-  // first: its factor would be older than this one.
+  // Factorises the current matrix now, into the front factor (BLAS at m_opt.threads; analysed first when it is not
+  // yet). Drops a background refresh first: its factor would be older than this one.
   bool refactor() {
     drop_pending();
     const BlasThreadsScope blas(m_opt.threads);
+    if (!m_front->analyzed()) {
+      try {
+        m_front->analyze(*m_A);
+      } catch (const std::exception&) {
+        return m_have_factor = false;
+      }
+    }
     m_have_factor = m_front->factorize(*m_A);
+    if (m_have_factor) {  // the solves use it from now on, also when they were bridged
+      m_bridging = false;
+      m_bridge.reset();
+    }
     fresh_factor();
     return m_have_factor;
   }
@@ -709,10 +734,15 @@ class PcgSolver final : public LinearSolver {
   }
   // Operations of one PCG iteration with the factor: solves with L and L^T, a product with A, five vector updates.
   [[nodiscard]] double iteration_flops() const {
-    return 4.0 * m_front->factor_entries() + 2.0 * double(m_A->nonZeros()) + 10.0 * double(m_A->rows());
+    return 4.0 * priced().factor_entries() + 2.0 * double(m_A->nonZeros()) + 10.0 * double(m_A->rows());
   }
   // A factorisation's price in iteration operations (see the class comment).
-  [[nodiscard]] double purchase_price() const { return m_front->factor_flops() / m_opt.factor_flop_advantage; }
+  [[nodiscard]] double purchase_price() const { return priced().factor_flops() / m_opt.factor_flop_advantage; }
+  // The factor whose operation counts price the iterations and the factorisation: the front one, or while the new
+  // pattern is not analysed yet (bridging), the old revision's.
+  [[nodiscard]] const CholmodFactor& priced() const {
+    return !m_front->analyzed() && m_bridge ? m_bridge->old_factor() : *m_front;
+  }
   void precondition(const VecX& r, VecX& z) {
     if (m_bridging)
       m_bridge->apply(r, z, m_single);

@@ -1,4 +1,4 @@
-// The EGL renderer (SPEC §6): headless EGL (device platform first, Mesa surfaceless as the fallback) and an OpenGL 3.3
+// The EGL renderer (SPEC §6): headless EGL (device platform first, the surfaceless platform as the fallback) and an OpenGL 3.3
 // core context current with no surface. Only the context is made here: the drawing (multisampled FBO, Blinn-Phong
 // shading, overlays, the arthroscope mask, the read-back into an RGB8 image) is GlDrawer's (gl_drawer.cpp), which
 // the viewer's window uses too. Function loading through libepoxy.
@@ -129,7 +129,10 @@ EglDisplay open_display(std::string& platform) {
   // EGL devices: the one chosen by the environment, or the first that initialises.
   const char* chosen = std::getenv("OCTOCUT_EGL_DEVICE");
   std::string tried;  // what was attempted, for the error message
-  if (has("EGL_EXT_platform_device") && has("EGL_EXT_device_enumeration")) {
+  // Enumeration comes as EGL_EXT_device_enumeration (Mesa) or inside EGL_EXT_device_base (NVIDIA's driver lists only
+  // that one: with the first name alone, the device platform was never tried on an H200).
+  const bool enumerate = has("EGL_EXT_device_enumeration") || has("EGL_EXT_device_base");
+  if (has("EGL_EXT_platform_device") && enumerate) {
     EGLDeviceEXT devices[32];
     EGLint count = 0;
     if (!eglQueryDevicesEXT(32, devices, &count)) count = 0;
@@ -153,19 +156,21 @@ EglDisplay open_display(std::string& platform) {
       }
     }
   } else {
-    tried = "no EGL_EXT_platform_device";
+    tried = enumerate ? "no EGL_EXT_platform_device" : "no EGL_EXT_device_enumeration or EGL_EXT_device_base";
   }
-  if (!has("EGL_EXT_platform_device") && chosen != nullptr && *chosen != '\0') {
-    throw RenderError("EGL: OCTOCUT_EGL_DEVICE is set but EGL_EXT_platform_device is not available: " +
+  if (chosen != nullptr && *chosen != '\0') {
+    throw RenderError("EGL: OCTOCUT_EGL_DEVICE is set but EGL devices cannot be used (" + tried + "): " +
                       egl_error_text(eglGetError()));
   }
 
   // Fallback: Mesa's surfaceless platform.
+  // (NVIDIA's driver offers this platform too.) The description says why no device was taken.
+  const std::string before_surfaceless = tried;
   tried += has("EGL_MESA_platform_surfaceless") ? ", the surfaceless platform tried" : ", no EGL_MESA_platform_surfaceless";
   if (has("EGL_MESA_platform_surfaceless")) {
     EglDisplay display = initialise(eglGetPlatformDisplayEXT(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, nullptr));
     if (display.get() != EGL_NO_DISPLAY) {
-      platform = "Mesa surfaceless";
+      platform = "EGL surfaceless platform (" + before_surfaceless + ")";
       return display;
     }
   }

@@ -131,6 +131,9 @@ class GoldenTest : public ::testing::Test {
     if (!renderer_available()) GTEST_SKIP() << "built without EGL";
     if (!s_renderer) s_renderer = make_renderer();
   }
+  // The renderer (its EGL context) goes before exit(): by the time static destructors run, NVIDIA's driver has torn
+  // itself down, and destroying the context then crashed in libepoxy (seen on an H200; llvmpipe does not mind).
+  static void TearDownTestSuite() { s_renderer.reset(); }
 
   /// Renders `scene`, checks that a second render is bit-identical, and compares with golden/<name>.png.
   Image render_and_compare(const std::string& name, const RenderScene& scene) {

@@ -156,10 +156,21 @@ bool ids_intersect(const Pos& P, const Tri& s, const Tri& t) {
     const Point a = P(s[si[0]]), b = P(s[si[1]]), c = P(s[sc]), d = P(t[tc]);
     return CGAL::coplanar(a, b, c, d) && CGAL::coplanar_orientation(a, b, c, d) == CGAL::POSITIVE;
   }
+  if (shared == 1) {
+    // Shared vertex v: when the other two corners of one triangle lie strictly on one side of the other's plane, the
+    // first meets that plane (so the other triangle) in v alone. Most neighbours end here, with two orientations.
+    const int i = si[0], j = ti[0];
+    const Point v = P(s[i]), s1 = P(s[(i + 1) % 3]), s2 = P(s[(i + 2) % 3]);
+    const Point t1 = P(t[(j + 1) % 3]), t2 = P(t[(j + 2) % 3]);
+    const CGAL::Orientation a = CGAL::orientation(v, s1, s2, t1);
+    if (a != CGAL::COPLANAR && a == CGAL::orientation(v, s1, s2, t2)) return false;
+    const CGAL::Orientation b = CGAL::orientation(v, t1, t2, s1);
+    if (b != CGAL::COPLANAR && b == CGAL::orientation(v, t1, t2, s2)) return false;
+  }
   const Kernel::Triangle_3 ts(P(s[0]), P(s[1]), P(s[2]));
   const Kernel::Triangle_3 tt(P(t[0]), P(t[1]), P(t[2]));
   if (shared == 1) {
-    // Shared vertex: they intersect when the edge opposite it in one triangle meets the other triangle.
+    // Otherwise they intersect when the edge opposite v in one triangle meets the other triangle.
     const int i = si[0], j = ti[0];
     const Kernel::Segment_3 es(P(s[(i + 1) % 3]), P(s[(i + 2) % 3]));
     const Kernel::Segment_3 et(P(t[(j + 1) % 3]), P(t[(j + 2) % 3]));

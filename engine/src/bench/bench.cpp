@@ -540,7 +540,11 @@ std::vector<BenchOutput> bench_latency(const std::string& scene_name) {
   const std::string file = asset_path("scenes/" + scene_name + ".json");
   const SceneStepRun run = run_scene_steps(load_scene(file), false);
   std::vector<double> latency;
-  for (const CutSummary& c : run.cuts) latency.push_back(c.latency_ms);
+  double settle_max = 0.0;  // ms, the longest step after any cut
+  for (const CutSummary& c : run.cuts) {
+    latency.push_back(c.latency_ms);
+    settle_max = std::max(settle_max, c.settle_max_ms);
+  }
   BenchOutput b;
   b.name = "latency/" + scene_name;
   b.runs = long(latency.size());
@@ -549,7 +553,9 @@ std::vector<BenchOutput> bench_latency(const std::string& scene_name) {
   b.params = {{"scene", "assets/scenes/" + scene_name + ".json"}, {"cuts", run.cuts.size()},
               {"threads", int(std::thread::hardware_concurrency())}};
   b.metrics = {{"latency_median_ms", b.ms.median}, {"latency_p95_ms", b.ms.p95}, {"step_median_ms", steps.median},
-               {"step_max_ms", steps.max}, {"elements", run.elements}, {"dofs", run.dofs},
+               {"step_max_ms", steps.max}, {"settle_max_ms", settle_max},
+               {"settle_max_over_step_median", steps.median > 0.0 ? settle_max / steps.median : 0.0},
+               {"elements", run.elements}, {"dofs", run.dofs},
                {"realtime_factor", run.wall_ms > 0 ? run.sim_time_s / (run.wall_ms / 1000.0) : 0.0}};
   return {b};
 }

@@ -85,6 +85,7 @@ struct World::Impl {
   long steps = 0;
   std::vector<double> step_ms;
   std::vector<std::size_t> awaiting_step;  // indices into cuts[] of the cuts whose next step has not run yet
+  std::vector<std::pair<std::size_t, int>> settling;  // cuts[] index, steps left of its CutSummary::kSettleSteps
 
   MaterialGraphSource graph_source = MaterialGraphSource::box;
   cutting::CutObject object;                           // S (the one copy), M, the face grid
@@ -395,6 +396,7 @@ CutSummary World::Impl::cut(std::size_t i, double t, bool scheduled) {
           o.ms.embedding,      o.ms.solver_update, o.ms.total};
   c.latency_ms = c.ms.back();
   awaiting_step.push_back(cuts.size());
+  settling.emplace_back(cuts.size(), CutSummary::kSettleSteps);
   cuts.push_back(c);
 
   // What the report should say about it.
@@ -529,6 +531,11 @@ StepResult World::step() {
   const double sim_ms = sim::ms_since(sim0);
   for (std::size_t c : m->awaiting_step) m->cuts[c].latency_ms += sim_ms;
   m->awaiting_step.clear();
+  for (auto& [c, left] : m->settling) {
+    m->cuts[c].settle_max_ms = std::max(m->cuts[c].settle_max_ms, sim_ms);
+    --left;
+  }
+  std::erase_if(m->settling, [](const auto& s) { return s.second <= 0; });
   m->run_due_cuts(r.cuts);
   if (m->track) m->track->after_step(*m->sim, r.cuts.empty() && !m->handles_move_after(t_start));
   ++m->steps;

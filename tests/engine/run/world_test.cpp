@@ -3,6 +3,7 @@
 // checked against the exact volume of a polygonal punch through an undeformed box.
 #include "octocut/engine/run/world.hpp"
 
+#include <algorithm>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -110,6 +111,13 @@ TEST_F(WorldTest, CutLatencyAndRealtimeFactorAddUpFromTheSteps) {
   EXPECT_GT(c.latency_ms, total);
   EXPECT_LE(c.latency_ms - total, step_ms[std::size_t(cut_step) + 1]);
   EXPECT_LE(total, step_ms[std::size_t(cut_step)]);
+  // settle_max_ms: the longest simulation step of the kSettleSteps after the cut, the first one (the latency's)
+  // among them, each within the World step that holds it.
+  double longest = 0.0;
+  const auto settle_end = std::min(step_ms.size(), std::size_t(cut_step) + 1 + CutSummary::kSettleSteps);
+  for (std::size_t s = std::size_t(cut_step) + 1; s < settle_end; ++s) longest = std::max(longest, step_ms[s]);
+  EXPECT_GE(c.settle_max_ms, c.latency_ms - total);
+  EXPECT_LE(c.settle_max_ms, longest);
   double sum_ms = 0.0;
   for (double ms : step_ms) sum_ms += ms;
   EXPECT_NEAR(report.realtime_factor, world.time() / (sum_ms / 1000.0), 1e-9 * report.realtime_factor);

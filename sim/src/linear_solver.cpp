@@ -42,10 +42,12 @@ class CholmodFactor {
       cholmod_start(c);
       c->print = 0;  // a failed factorisation is reported through SolveInfo and counted by the caller
     }
-    // The block analysis: AMD, weighted postorder, supernodal.
+    // The block analysis: AMD (or the better of AMD and nested dissection, thorough_ordering), weighted postorder,
+    // supernodal.
     m_cb.supernodal = CHOLMOD_SUPERNODAL;
     m_cb.nmethods = 1;
     m_cb.method[0].ordering = CHOLMOD_AMD;
+    m_cb.method[1].ordering = CHOLMOD_NESDIS;
     m_cb.postorder = 1;
     m_default_nrelax[0] = m_cb.nrelax[0];
     m_default_nrelax[1] = m_cb.nrelax[1];
@@ -87,6 +89,7 @@ class CholmodFactor {
     // columns: scaled to blocks so that the scalar supernodes come out about as wide as a scalar analysis makes them.
     for (int r = 0; r < 3; ++r)
       m_cb.nrelax[r] = std::max<std::size_t>(1, m_default_nrelax[r] / std::size_t(block));
+    m_cb.nmethods = m_thorough ? 2 : 1;  // method[1]: nested dissection; CHOLMOD keeps the one with the fewest entries
     cholmod_factor* Lb = cholmod_analyze(&g, &m_cb);
     if (Lb == nullptr || m_cb.status < CHOLMOD_OK || !Lb->is_super) {
       if (Lb) cholmod_free_factor(&Lb, &m_cb);
@@ -112,6 +115,8 @@ class CholmodFactor {
     free_factor();
     m_factor_flops = m_factor_entries = 0.0;
   }
+  /// The next analyses order with the better of AMD and nested dissection (LinearSolverOptions::thorough_ordering).
+  void thorough_ordering(bool thorough) { m_thorough = thorough; }
   /// Keeps a single-precision copy of each factor for solve_single.
   void keep_single(bool keep) { m_keep_single = keep; }
   /// x = (L L^T)^-1 b (in A's ordering) with the single-precision copy of the last factor, in double arithmetic:
@@ -336,6 +341,7 @@ class CholmodFactor {
   cholmod_dense* m_y = nullptr;
   cholmod_dense* m_e = nullptr;
   int m_block = 1;
+  bool m_thorough = false;        ///< order with the better of AMD and NESDIS
   double m_factor_flops = 0.0;    ///< of one numeric factorisation
   double m_factor_entries = 0.0;  ///< nnz(L)
 };
@@ -367,7 +373,9 @@ void retire_factorization(std::unique_ptr<BackgroundFactorization> f) {
 class CholmodSolver final : public LinearSolver {
  public:
   // A failed factorisation is reported through SolveInfo and counted by the caller, not printed by CHOLMOD.
-  explicit CholmodSolver(int threads) : m_threads(threads) {}
+  CholmodSolver(int threads, bool thorough_ordering) : m_threads(threads) {
+    m_llt.thorough_ordering(thorough_ordering);
+  }
   void analyze_pattern(const SpMat& A) override {
     m_ok = false;
     m_llt.analyze(A);
@@ -581,6 +589,7 @@ class PcgSolver final : public LinearSolver {
     drop_pending();
     if (m_use_cholesky) {
       m_front->keep_single(m_single);
+      m_front->thorough_ordering(m_opt.thorough_ordering);
       if (m_opt.factor_lag_solves > 0)
         m_front->clear();
       else
@@ -711,6 +720,7 @@ class PcgSolver final : public LinearSolver {
     m_pending->A = *m_A;
     m_pending->factor = m_back ? std::move(m_back) : std::make_unique<CholmodFactor>();
     m_pending->factor->keep_single(m_single);
+    m_pending->factor->thorough_ordering(m_opt.thorough_ordering);
     CholmodFactor* factor = m_pending->factor.get();
     const SpMat* A = &m_pending->A;
     m_pending->done = std::async(std::launch::async, [factor, A] {
@@ -834,7 +844,7 @@ class PcgSolver final : public LinearSolver {
 }  // namespace
 
 std::unique_ptr<LinearSolver> make_linear_solver(const std::string& name, const LinearSolverOptions& options) {
-  if (name == "cholmod") return std::make_unique<CholmodSolver>(options.threads);
+  if (name == "cholmod") return std::make_unique<CholmodSolver>(options.threads, options.thorough_ordering);
   if (name == "pcg") return std::make_unique<PcgSolver>(options);
   throw std::invalid_argument("unknown linear solver '" + name + "'");
 }

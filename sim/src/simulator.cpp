@@ -68,8 +68,9 @@ void Simulator::refresh_solver() {
   m_pattern_analyzed = true;
 }
 
-std::unique_ptr<LinearSolver> Simulator::make_solver() const {
+std::unique_ptr<LinearSolver> Simulator::make_solver(bool initial) const {
   LinearSolverOptions lo;
+  lo.thorough_ordering = initial;  // the model a run starts with keeps its pattern longest
   lo.tolerance = m_options.tolerance;
   lo.max_iterations = m_options.max_iterations;
   lo.preconditioner = m_options.preconditioner;
@@ -108,7 +109,7 @@ PreparedModel Simulator::prepare_model(ObjectModel model, bool analyze) const {
   p.model = std::make_unique<ObjectModel>(std::move(model));
   p.fem = std::make_unique<FemSystem>(*p.model, *p.serial);
   p.constrained = constrained_flags(*p.model);
-  p.solver = make_solver();
+  p.solver = make_solver(false);
   if (analyze && p.model->num_dofs() > 0) {
     try {
       p.solver->analyze_pattern(p.fem->system_pattern(p.constrained));

@@ -59,6 +59,12 @@ struct LinearSolverOptions {
   int factor_lag_solves = 0;
   std::string preconditioner = "cholesky";  ///< pcg: "cholesky" (lagged factor) | "jacobi"
   int threads = 1;             ///< BLAS threads during numeric factorisations (one thread otherwise)
+  /// Cholesky factors: order with the better (fewer entries of L) of AMD and CHOLMOD's nested dissection instead of
+  /// AMD alone. The analysis then takes 5-10 ms more (at a few thousand nodes); a blocky 3D mesh gets a factor with
+  /// 20-25 % fewer entries and half the operations (a 10^3 cube), steps 10-30 % faster at 1k-30k elements; the thin
+  /// meniscus keeps AMD's. Worth it where a pattern is used for long: the simulator asks for it for the model it
+  /// starts with, not for the revisions a cut prepares (their analysis is on the cut's path or in the background).
+  bool thorough_ordering = false;
 };
 
 /// Creates "cholmod" (supernodal LL^T, exact every call) or "pcg" (warm-started conjugate gradients preconditioned

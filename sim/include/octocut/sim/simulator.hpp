@@ -169,7 +169,9 @@ class Simulator {
   double line_search(std::vector<Vec3>& x, const VecX& dx, const VecX& f_ext, double done, ElementFrame& frame,
                      VecX& r);
   void rebuild();
-  [[nodiscard]] std::unique_ptr<LinearSolver> make_solver() const;
+  /// A solver for the current options; `initial`: for the model the simulator starts with (a thorough ordering,
+  /// LinearSolverOptions::thorough_ordering), else for a revision a cut prepares.
+  [[nodiscard]] std::unique_ptr<LinearSolver> make_solver(bool initial = true) const;
 
   ObjectModel m_model;
   SimulatorOptions m_options;

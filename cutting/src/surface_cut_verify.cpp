@@ -154,6 +154,10 @@ bool ids_intersect(const Pos& P, const Tri& s, const Tri& t) {
     const int sc = 3 - si[0] - si[1];
     const int tc = 3 - ti[0] - ti[1];
     const Point a = P(s[si[0]]), b = P(s[si[1]]), c = P(s[sc]), d = P(t[tc]);
+    // A triangle whose third corner lies on the line of the shared edge is a segment on that line: it meets the other
+    // triangle (which touches that line only along the edge) in the shared edge alone. (Degenerate triangles are
+    // reported by their own test; coplanar_orientation requires a, b, c not collinear.)
+    if (CGAL::collinear(a, b, c) || CGAL::collinear(a, b, d)) return false;
     return CGAL::coplanar(a, b, c, d) && CGAL::coplanar_orientation(a, b, c, d) == CGAL::POSITIVE;
   }
   if (shared == 1) {
@@ -167,6 +171,10 @@ bool ids_intersect(const Pos& P, const Tri& s, const Tri& t) {
     const CGAL::Orientation b = CGAL::orientation(v, t1, t2, s1);
     if (b != CGAL::COPLANAR && b == CGAL::orientation(v, t1, t2, s2)) return false;
   }
+  // A degenerate triangle (collinear corners) is reported by the degenerate test, not as an intersection; CGAL's
+  // triangle predicates below require non-degenerate triangles (a debug build asserts it).
+  const auto flat = [&](const Tri& x) { return CGAL::collinear(P(x[0]), P(x[1]), P(x[2])); };
+  if (flat(s) || flat(t)) return false;
   const Kernel::Triangle_3 ts(P(s[0]), P(s[1]), P(s[2]));
   const Kernel::Triangle_3 tt(P(t[0]), P(t[1]), P(t[2]));
   if (shared == 1) {

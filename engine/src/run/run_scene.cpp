@@ -78,8 +78,8 @@ class Run {
   }
 
   // The whole timeline: the first frame at rest, then steps, frames, surfaces and the progress line.
+  // The scene is read through m_world each time: a replayed reset replaces the world (and the scene it holds).
   void run() {
-    const Scene& scene = m_world.scene();
     open_outputs();
     if (m_render) render_frame();
     const bool tty = m_options.progress && isatty(STDERR_FILENO);
@@ -91,24 +91,24 @@ class Run {
       const StepResult step = m_world.step();
       apply_replay_events();
       const long i = m_world.steps();
-      if (scene.output.surface_every > 0 && i % scene.output.surface_every == 0) {
+      if (m_world.scene().output.surface_every > 0 && i % m_world.scene().output.surface_every == 0) {
         char name[32];
         std::snprintf(name, sizeof(name), "surface_%06ld.ply", i);
         write_file_atomic(m_out / "surfaces" / name, encode_ply_binary(m_world.deformed_surface(), ply_precision()));
       }
-      if (m_render && i % scene.render.every == 0) render_frame();
-      if (scene.output.contact_forces) append_contact_rows(step.t);
+      if (m_render && i % m_world.scene().render.every == 0) render_frame();
+      if (m_world.scene().output.contact_forces) append_contact_rows(step.t);
       if (tty && (sim::ms_since(last_progress) > 200.0 || !running())) {
         last_progress = sim::Clock::now();
         print_progress(step);
       }
     }
     if (!state_finite(m_world.simulator().state())) throw std::runtime_error("the state is not finite");
-    if (scene.output.surface_final) {
+    if (m_world.scene().output.surface_final) {
       write_file_atomic(m_out / "surface_final.ply", encode_ply_binary(m_world.deformed_surface(), ply_precision()));
       write_file_atomic(m_out / "surface_rest_final.ply", encode_ply_binary(m_world.rest_surface(), ply_precision()));
     }
-    if (scene.output.contact_forces)
+    if (m_world.scene().output.contact_forces)
       write_file_atomic(m_out / "contact_forces.csv",
                         m_contact_csv.empty() ? std::string("t,name,fx,fy,fz,max_penetration_m\n") : m_contact_csv);
     // Every queued frame is drawn and on disk before the run counts as done.

@@ -2,7 +2,6 @@
 
 #include <cholmod.h>
 
-#include <Eigen/Cholesky>
 #include <chrono>
 
 #include "octocut/sim/parallel.hpp"
@@ -470,7 +469,8 @@ class CutBridge {
         m_rl[3 * Eigen::Index(i) + c] = m_r1[col] - aw;
       }
     solve_local(m_rl);
-    for (std::size_t i = 0; i < m_local.size(); ++i) z.segment<3>(3 * m_local[i]) += m_zl.segment<3>(3 * Eigen::Index(i));
+    for (std::size_t i = 0; i < m_local.size(); ++i)
+      z.segment<3>(3 * m_local[i]) += m_zl.segment<3>(3 * Eigen::Index(i));
   }
 
  private:

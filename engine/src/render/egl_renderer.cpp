@@ -1,5 +1,5 @@
-// The EGL renderer (SPEC §6): headless EGL (device platform first, the surfaceless platform as the fallback) and an OpenGL 3.3
-// core context current with no surface. Only the context is made here: the drawing (multisampled FBO, Blinn-Phong
+// The EGL renderer (SPEC §6): headless EGL (device platform first, the surfaceless platform as the fallback) and an
+// OpenGL 3.3 core context current with no surface. Only the context is made here: the drawing (multisampled FBO, Blinn-Phong
 // shading, overlays, the arthroscope mask, the read-back into an RGB8 image) is GlDrawer's (gl_drawer.cpp), which
 // the viewer's window uses too. Function loading through libepoxy.
 #include <epoxy/egl.h>
@@ -163,8 +163,8 @@ EglDisplay open_display(std::string& platform) {
                       egl_error_text(eglGetError()));
   }
 
-  // Fallback: Mesa's surfaceless platform.
-  // (NVIDIA's driver offers this platform too.) The description says why no device was taken.
+  // Fallback: the surfaceless platform (EGL_MESA_platform_surfaceless, which NVIDIA's driver offers too). The
+  // description says why no device was taken.
   const std::string before_surfaceless = tried;
   tried += has("EGL_MESA_platform_surfaceless") ? ", the surfaceless platform tried" : ", no EGL_MESA_platform_surfaceless";
   if (has("EGL_MESA_platform_surfaceless")) {

@@ -84,8 +84,9 @@ struct World::Impl {
   long total_steps = 0;
   long steps = 0;
   std::vector<double> step_ms;
-  std::vector<std::size_t> awaiting_step;  // indices into cuts[] of the cuts whose next step has not run yet
-  std::vector<std::pair<std::size_t, int>> settling;  // cuts[] index, steps left of its CutSummary::kSettleSteps
+  // The cuts whose kSettleSteps steps have not all run yet: cuts[] index, steps left (kSettleSteps: the next step is
+  // the first after the cut, which counts in its latency too).
+  std::vector<std::pair<std::size_t, int>> settling;
 
   MaterialGraphSource graph_source = MaterialGraphSource::box;
   cutting::CutObject object;                           // S (the one copy), M, the face grid
@@ -395,7 +396,6 @@ CutSummary World::Impl::cut(std::size_t i, double t, bool scheduled) {
   c.ms = {o.ms.back_transform, o.ms.surface, o.ms.material_graph, o.ms.refine, o.ms.node_split,
           o.ms.embedding,      o.ms.solver_update, o.ms.total};
   c.latency_ms = c.ms.back();
-  awaiting_step.push_back(cuts.size());
   settling.emplace_back(cuts.size(), CutSummary::kSettleSteps);
   cuts.push_back(c);
 
@@ -529,9 +529,8 @@ StepResult World::step() {
   m->update_surface();
   // The first step after a cut is part of what the cut costs the user (the solver may rebuild after it).
   const double sim_ms = sim::ms_since(sim0);
-  for (std::size_t c : m->awaiting_step) m->cuts[c].latency_ms += sim_ms;
-  m->awaiting_step.clear();
   for (auto& [c, left] : m->settling) {
+    if (left == CutSummary::kSettleSteps) m->cuts[c].latency_ms += sim_ms;
     m->cuts[c].settle_max_ms = std::max(m->cuts[c].settle_max_ms, sim_ms);
     --left;
   }

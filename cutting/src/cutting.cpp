@@ -887,7 +887,7 @@ Verdict run_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceEmbedd
   // S compacted once, in place; the embedding follows it (strong guarantee: when it throws, it is unchanged and the
   // transaction restores S).
   const sim::SurfaceEdit edit = surface.compact(cut.unused);
-  embedding.update(*work.next, object.surface, edit);
+  embedding.update(*work.next, object.surface, edit, &simulator.executor());
   out.ms.embedding = ms_since(t0);
   out.ms.solver_update = adopt_model(simulator, stages);
   surface.commit();

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <iterator>
@@ -131,6 +132,82 @@ void check_vertex_fans(const sim::TriMesh& out, const std::vector<int32_t>& chan
   }
 }
 
+// A sufficient, exact test that triangles s and t meet at most in the vertices they share (by id) and in an edge they
+// share: projected along the axis that s's normal (in doubles) leans on most, with an exact 2D orientation, some
+// edge line of one triangle has that triangle's third corner strictly on one side and every corner of the other
+// strictly on the other side or on the edge itself (a shared corner of it). The projections then meet only in
+// shared corners or the shared edge, and since the first triangle projects one to one, a common point of the two
+// triangles is such a corner or lies on that edge. Dropping a coordinate is exact, so the answer is exact whatever
+// the axis; pieces of one face of S or of one blade facet, nearly coplanar after rounding, end here instead of in
+// the exact arithmetic of the 3D predicates. False says nothing.
+// The orientation of the 2D points a, b, c (doubles, exact inputs): decided in plain doubles when Shewchuk's error
+// bound for orient2d (ccwerrboundA) proves the sign, else by CGAL's exact predicate.
+CGAL::Orientation orientation_2(const Kernel::Point_2& a, const Kernel::Point_2& b, const Kernel::Point_2& c) {
+  constexpr double kEps = std::numeric_limits<double>::epsilon() / 2.0;  // 2^-53
+  constexpr double kBound = (3.0 + 16.0 * kEps) * kEps;
+  const double left = (a.x() - c.x()) * (b.y() - c.y());
+  const double right = (a.y() - c.y()) * (b.x() - c.x());
+  const double det = left - right;
+  const double bound = kBound * (std::abs(left) + std::abs(right));
+  if (det > bound) return CGAL::LEFT_TURN;
+  if (-det > bound) return CGAL::RIGHT_TURN;
+  return CGAL::orientation(a, b, c);
+}
+
+// CGAL::orientation(p, q, r, s) (the sign of det[q - p, r - p, s - p]), decided in plain doubles when Shewchuk's error
+// bound for orient3d (o3derrboundA) proves the sign, else by CGAL's exact predicate. Shewchuk's determinant
+// det[p - s, q - s, r - s] has the opposite sign.
+CGAL::Orientation orientation_3(const Point& p, const Point& q, const Point& r, const Point& s) {
+  constexpr double kEps = std::numeric_limits<double>::epsilon() / 2.0;  // 2^-53
+  constexpr double kBound = (7.0 + 56.0 * kEps) * kEps;
+  const double adx = p.x() - s.x(), bdx = q.x() - s.x(), cdx = r.x() - s.x();
+  const double ady = p.y() - s.y(), bdy = q.y() - s.y(), cdy = r.y() - s.y();
+  const double adz = p.z() - s.z(), bdz = q.z() - s.z(), cdz = r.z() - s.z();
+  const double bdxcdy = bdx * cdy, cdxbdy = cdx * bdy;
+  const double cdxady = cdx * ady, adxcdy = adx * cdy;
+  const double adxbdy = adx * bdy, bdxady = bdx * ady;
+  const double det = adz * (bdxcdy - cdxbdy) + bdz * (cdxady - adxcdy) + cdz * (adxbdy - bdxady);
+  const double permanent = (std::abs(bdxcdy) + std::abs(cdxbdy)) * std::abs(adz) +
+                           (std::abs(cdxady) + std::abs(adxcdy)) * std::abs(bdz) +
+                           (std::abs(adxbdy) + std::abs(bdxady)) * std::abs(cdz);
+  const double bound = kBound * permanent;
+  if (det > bound) return CGAL::NEGATIVE;
+  if (-det > bound) return CGAL::POSITIVE;
+  return CGAL::orientation(p, q, r, s);
+}
+
+template <class Pos>
+bool separated_in_projection(const Pos& P, const Tri& s, const Tri& t) {
+  using Point2 = Kernel::Point_2;
+  const Point a = P(s[0]), b = P(s[1]), c = P(s[2]);
+  const Vec3 n = Vec3(b.x() - a.x(), b.y() - a.y(), b.z() - a.z())
+                     .cross(Vec3(c.x() - a.x(), c.y() - a.y(), c.z() - a.z()))
+                     .cwiseAbs();
+  const int axis = n.x() >= n.y() && n.x() >= n.z() ? 0 : (n.y() >= n.z() ? 1 : 2);
+  const auto drop = [&](int32_t id) {
+    const Point p = P(id);
+    return axis == 0 ? Point2(p.y(), p.z()) : (axis == 1 ? Point2(p.z(), p.x()) : Point2(p.x(), p.y()));
+  };
+  const std::array<Point2, 3> sp{drop(s[0]), drop(s[1]), drop(s[2])};
+  const std::array<Point2, 3> tp{drop(t[0]), drop(t[1]), drop(t[2])};
+  const auto separates = [](const Tri& x, const std::array<Point2, 3>& xp, const Tri& y,
+                            const std::array<Point2, 3>& yp) {
+    for (int k = 0; k < 3; ++k) {
+      const int k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+      const CGAL::Orientation own = orientation_2(xp[k], xp[k1], xp[k2]);
+      if (own == CGAL::COLLINEAR) return false;  // x projects onto a segment: no edge line separates
+      bool all = true;
+      for (int j = 0; j < 3 && all; ++j) {
+        if (y[j] == x[k] || y[j] == x[k1]) continue;
+        all = orientation_2(xp[k], xp[k1], yp[j]) == -own;
+      }
+      if (all) return true;
+    }
+    return false;
+  };
+  return separates(s, sp, t, tp) || separates(t, tp, s, sp);
+}
+
 // Whether two triangles intersect other than in a shared vertex or a shared edge (the rules of
 // PMP::self_intersections, on vertex ids; P(id) gives a vertex's point).
 template <class Pos>
@@ -149,11 +226,14 @@ bool ids_intersect(const Pos& P, const Tri& s, const Tri& t) {
     }
   }
   if (shared >= 3) return true;  // the same triangle twice
+  if (separated_in_projection(P, s, t)) return false;
   if (shared == 2) {
     // Shared edge (a, b): they overlap when the four points are coplanar and the third vertices lie on one side.
     const int sc = 3 - si[0] - si[1];
     const int tc = 3 - ti[0] - ti[1];
     const Point a = P(s[si[0]]), b = P(s[si[1]]), c = P(s[sc]), d = P(t[tc]);
+    // Not coplanar: the two planes meet in the line of the shared edge, so the triangles meet in that edge alone.
+    if (orientation_3(a, b, c, d) != CGAL::COPLANAR) return false;
     // A triangle whose third corner lies on the line of the shared edge is a segment on that line: it meets the other
     // triangle (which touches that line only along the edge) in the shared edge alone. (Degenerate triangles are
     // reported by their own test; coplanar_orientation requires a, b, c not collinear.)
@@ -166,10 +246,10 @@ bool ids_intersect(const Pos& P, const Tri& s, const Tri& t) {
     const int i = si[0], j = ti[0];
     const Point v = P(s[i]), s1 = P(s[(i + 1) % 3]), s2 = P(s[(i + 2) % 3]);
     const Point t1 = P(t[(j + 1) % 3]), t2 = P(t[(j + 2) % 3]);
-    const CGAL::Orientation a = CGAL::orientation(v, s1, s2, t1);
-    if (a != CGAL::COPLANAR && a == CGAL::orientation(v, s1, s2, t2)) return false;
-    const CGAL::Orientation b = CGAL::orientation(v, t1, t2, s1);
-    if (b != CGAL::COPLANAR && b == CGAL::orientation(v, t1, t2, s2)) return false;
+    const CGAL::Orientation a = orientation_3(v, s1, s2, t1);
+    if (a != CGAL::COPLANAR && a == orientation_3(v, s1, s2, t2)) return false;
+    const CGAL::Orientation b = orientation_3(v, t1, t2, s1);
+    if (b != CGAL::COPLANAR && b == orientation_3(v, t1, t2, s2)) return false;
   }
   // A degenerate triangle (collinear corners) is reported by the degenerate test, not as an intersection; CGAL's
   // triangle predicates below require non-degenerate triangles (a debug build asserts it).
@@ -306,7 +386,7 @@ class Repair {
 // empty.
 std::vector<int32_t> Repair::detect(const std::vector<char>& dirty) const {
   using Box = CGAL::Box_intersection_d::Box_with_info_d<double, 3, int32_t>;
-  std::vector<char> bad(m_.tris.size(), 0);
+  std::vector<char> bad(m_.tris.size(), 0), suspect(m_.tris.size(), 0);
   std::vector<Box> suspects, all;
   Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
   const auto make = [&](const Tri& t, int32_t info) {
@@ -322,6 +402,7 @@ std::vector<int32_t> Repair::detect(const std::vector<char>& dirty) const {
     if (m_.whole[t] || std::none_of(x.begin(), x.end(), [&](int32_t n) { return is_new(n); })) continue;
     if (!dirty.empty() && !dirty[t]) continue;
     if (degenerate(x) || tiny(x)) bad[t] = 1;
+    suspect[t] = 1;
     suspects.push_back(all.back());
     const auto b = box_of(x);
     lo = lo.cwiseMin(b[0]);
@@ -335,6 +416,8 @@ std::vector<int32_t> Repair::detect(const std::vector<char>& dirty) const {
     CGAL::box_intersection_d(suspects.begin(), suspects.end(), all.begin(), all.end(), [&](const Box& x, const Box& y) {
       if (x.info() == y.info()) return;
       const auto t = static_cast<std::size_t>(x.info() / 2);
+      // Two suspects come as (x, y) and as (y, x); the test is symmetric and marks both, so it runs once.
+      if ((y.info() & 1) && suspect[static_cast<std::size_t>(y.info() / 2)] && y.info() / 2 < x.info() / 2) return;
       const Tri& other = (y.info() & 1) ? m_.tris[static_cast<std::size_t>(y.info() / 2)]
                                         : m_.surface->triangles[static_cast<std::size_t>(y.info() / 2)];
       if (ids_intersect(pos, m_.tris[t], other)) {

@@ -3,7 +3,9 @@
 // anchors along the triangles of S; weights clamped).
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
+#include <optional>
 #include <stdexcept>
 
 #include "octocut/sim/embedding.hpp"
@@ -145,15 +147,19 @@ bool leaves_share_dof(const DofMap& P, int a, int b) {
 // The anchor of each fallback vertex: the nearest regularly bound vertex of its surface component along triangle
 // edges (fewest edges, the lowest vertex index among equals), or -1 when the component has none. `embedding` (|V|)
 // marks the fallback vertices by leaf -1 and the regular ones by their leaf; `lost` lists the fallback vertices;
-// `tri_begin`, `tri` are the vertex-to-triangle CSR of `triangles`. Returns one anchor per vertex (|V|), -1 for the
+// `tri_begin`, `tri` are the vertex-to-triangle CSR of `triangles`. Writes one anchor per vertex (|V|), -1 for the
 // regular vertices. A breadth-first search from all regular vertices at once, layer by layer through fallback
 // vertices only: the nearest regular vertices of a vertex at depth d + 1 are the union of those of its neighbours at
 // depth d, so keeping the lowest anchor among those neighbours gives the tie-break exactly. Cost: the triangles
 // around the fallback vertices, independent of |V| beyond one array fill.
-std::vector<int> fallback_anchors(std::span<const VertexEmbedding> embedding, std::span<const std::size_t> lost,
-                                  std::span<const int> tri_begin, std::span<const int> tri,
-                                  std::span<const std::array<int32_t, 3>> triangles) {
-  std::vector<int> anchor(embedding.size(), -1), depth(embedding.size(), -1);
+// `anchor` and `depth` (|V| each) are the caller's arrays, so that repeated calls reuse their pages; on return
+// `anchor` holds the result and `depth` is scratch.
+void fallback_anchors(std::span<const VertexEmbedding> embedding, std::span<const std::size_t> lost,
+                      std::span<const int> tri_begin, std::span<const int> tri,
+                      std::span<const std::array<int32_t, 3>> triangles, std::vector<int>& anchor,
+                      std::vector<int>& depth) {
+  anchor.assign(embedding.size(), -1);
+  depth.assign(embedding.size(), -1);
   std::vector<std::size_t> frontier, next;
   // Depth 1: fallback vertices with a regular neighbour take the lowest one.
   for (const std::size_t v : lost) {
@@ -184,7 +190,6 @@ std::vector<int> fallback_anchors(std::span<const VertexEmbedding> embedding, st
         }
     frontier.swap(next);
   }
-  return anchor;
 }
 
 // Appends the composed row of e to (dof, weight): vertex = sum_k w_k (P x)_(8 leaf + k), the entries of one DOF
@@ -206,6 +211,29 @@ VertexEmbedding fallback_embedding(const Octree& tree, const RootGeometry& root,
   e.weights = clamp_fallback_weights(trilinear_weights(local_coordinates(root.cell_box(tree.leaf(leaf)), p)));
   return e;
 }
+
+// The leaves of a new tree that the old one did not have, for the fallback hints of SurfaceEmbedding::embed: a hinted
+// leaf stays the nearest unless one of them is at least as near.
+class NewLeaves {
+ public:
+  NewLeaves(const Octree& tree, const RootGeometry& root, std::span<const char> kept_new) {
+    for (std::size_t l = 0; l < kept_new.size(); ++l) {
+      if (kept_new[l]) continue;
+      const Box3 b = root.cell_box(tree.leaf(int(l)));
+      m_all = m_box.empty() ? b : Box3{m_all.min.cwiseMin(b.min), m_all.max.cwiseMax(b.max)};
+      m_box.push_back(b);
+    }
+  }
+  // Whether some new leaf lies within squared distance d2 (m^2) of p, ties included.
+  [[nodiscard]] bool within(const Vec3& p, double d2) const {
+    if (m_box.empty() || box_distance2(m_all, p) > d2) return false;
+    return std::any_of(m_box.begin(), m_box.end(), [&](const Box3& b) { return box_distance2(b, p) <= d2; });
+  }
+
+ private:
+  std::vector<Box3> m_box;  ///< rest boxes of the new leaves, m
+  Box3 m_all;               ///< their bounding box, m
+};
 
 }  // namespace
 
@@ -263,47 +291,91 @@ VertexEmbedding embed_vertex(const Octree& tree, const RootGeometry& root, const
   return fallback_embedding(tree, root, leaf, rest);
 }
 
-void SurfaceEmbedding::embed(const ObjectModel& model, const TriMesh& surface, std::span<const int> redo, bool all) {
-  // Re-embed the listed vertices (all of them when `all` is set); those in no leaf are collected, ascending.
+
+void SurfaceEmbedding::embed(const ObjectModel& model, const TriMesh& surface, std::span<const int> redo, bool all,
+                             Executor* exec, std::span<const FallbackHint> hints, std::span<const char> kept_new) {
+  // Re-embed the listed vertices (all of them when `all` is set); those in no leaf are collected, ascending. Each
+  // vertex is written by one task only and reads nothing another task writes, so the result does not depend on the
+  // thread count.
   if (m_tree.size() == 0) throw std::invalid_argument("SurfaceEmbedding: the model has no leaf");
   const std::vector<Vec3>& rest = surface.vertices;
-  std::vector<std::size_t> lost;
-  auto one = [&](std::size_t v) {
-    m_embedding[v] = regular_embedding(m_tree, m_root, rest[v]);
-    if (m_embedding[v].leaf < 0) lost.push_back(v);
+  const std::size_t n = all ? rest.size() : redo.size();
+  const auto vertex = [&](std::size_t i) { return all ? i : std::size_t(redo[i]); };
+  const auto parallel = [&](std::size_t count, const std::function<void(std::size_t)>& body) {
+    const auto chunk = [&](int begin, int end) {
+      for (int i = begin; i < end; ++i) body(std::size_t(i));
+    };
+    if (exec)
+      exec->parallel_for(int(count), 256, chunk);
+    else
+      chunk(0, int(count));
   };
-  if (all) {
-    for (std::size_t v = 0; v < rest.size(); ++v) one(v);
-  } else {
-    for (const int v : redo) one(std::size_t(v));
-  }
+  parallel(n, [&](std::size_t i) {
+    const std::size_t v = vertex(i);
+    m_embedding[v] = regular_embedding(m_tree, m_root, rest[v]);
+  });
+  std::vector<std::size_t> lost;
+  for (std::size_t i = 0; i < n; ++i)
+    if (m_embedding[vertex(i)].leaf < 0) lost.push_back(vertex(i));
+  m_fallback_anchor.clear();
+  if (lost.empty()) return;
   // The fallback vertices go to the nearest leaf of their anchor's material component (the plain nearest leaf when
   // their surface component has no regular vertex), found on a bucket grid built once for all of them. Every
-  // vertex not in `lost` is regular here (update() re-embeds all fallback vertices), and m_tri matches the
-  // triangles of `surface`.
-  if (!lost.empty()) {
-    const NearestLeafGrid grid(m_tree, m_root);
-    const std::vector<int> anchor = fallback_anchors(m_embedding, lost, m_tri_begin, m_tri, surface.triangles);
-    std::vector<int> component;  // per leaf, computed on first need (one pass over P)
-    for (const std::size_t v : lost) {
-      // The plain nearest leaf is the answer when it lies in the anchor's component (it is then also the nearest
-      // there, with the same tie-break). Sharing a DOF with the anchor's leaf proves that without the global pass.
-      int leaf = grid.nearest(rest[v]);
-      const int a = anchor[v];
-      if (a >= 0) {
-        const int home = m_embedding[std::size_t(a)].leaf;
-        if (!leaves_share_dof(model.dofs(), leaf, home)) {
-          if (component.empty()) {
-            int count = 0;
-            component = element_components(model, count);  // two leaves are one component when they share a DOF
-          }
-          const int c = component[std::size_t(home)];
-          if (component[std::size_t(leaf)] != c) leaf = grid.nearest(rest[v], c, component);
-        }
-      }
-      m_embedding[v] = fallback_embedding(m_tree, m_root, leaf, rest[v]);
-    }
+  // vertex not in `lost` is regular here (update() re-embeds all fallback vertices), and m_tri matches the triangles
+  // of `surface`. The plain nearest leaf is the answer when it lies in the anchor's component (it is then also the
+  // nearest there, with the same tie-break); sharing a DOF with the anchor's leaf proves that without the global
+  // pass over the components, which runs only when some vertex needs it.
+  fallback_anchors(m_embedding, lost, m_tri_begin, m_tri, surface.triangles, m_anchor, m_depth);
+  const std::vector<int>& anchor = m_anchor;
+  for (const std::size_t v : lost) m_fallback_anchor.emplace_back(int(v), anchor[v]);
+  // The hint of each lost vertex (-1: none). A hinted vertex keeps its leaf (state 1) when its anchor is the same and
+  // no new leaf is as near; the component check below may still send it to the search (state 0).
+  std::vector<int> hint(lost.size(), -1);
+  for (std::size_t i = 0, h = 0; i < lost.size() && h < hints.size(); ++i) {
+    while (h < hints.size() && std::size_t(hints[h].vertex) < lost[i]) ++h;
+    if (h < hints.size() && std::size_t(hints[h].vertex) == lost[i]) hint[i] = int(h);
   }
+  const NewLeaves fresh(m_tree, m_root, kept_new);
+  const DofMap& P = model.dofs();
+  std::vector<int> leaf(lost.size(), -1);
+  std::vector<char> other(lost.size(), 0);  // 1: the leaf found shares no DOF with the anchor's leaf
+  std::vector<char> state(lost.size(), 0);
+  parallel(lost.size(), [&](std::size_t i) {
+    if (hint[i] < 0) return;
+    const std::size_t v = lost[i];
+    const FallbackHint& h = hints[std::size_t(hint[i])];
+    if (h.leaf < 0 || h.anchor != anchor[v]) return;
+    if (fresh.within(rest[v], box_distance2(m_root.cell_box(m_tree.leaf(h.leaf)), rest[v]))) return;
+    leaf[i] = h.leaf;
+    state[i] = 1;
+  });
+  // The others search, on a grid built only when some vertex needs it.
+  std::optional<NearestLeafGrid> grid;
+  if (std::find(state.begin(), state.end(), char(0)) != state.end()) grid.emplace(m_tree, m_root);
+  parallel(lost.size(), [&](std::size_t i) {
+    const int a = anchor[lost[i]];
+    if (state[i] == 0) leaf[i] = grid->nearest(rest[lost[i]]);
+    other[i] = a >= 0 && !leaves_share_dof(P, leaf[i], m_embedding[std::size_t(a)].leaf);
+  });
+  std::vector<int> component;  // per leaf: two leaves are one component when they share a DOF
+  if (std::find(other.begin(), other.end(), char(1)) != other.end()) {
+    int count = 0;
+    component = element_components(model, count);
+    if (!grid) grid.emplace(m_tree, m_root);
+  }
+  // The anchors are regular vertices, which this pass does not write.
+  parallel(lost.size(), [&](std::size_t i) {
+    const std::size_t v = lost[i];
+    if (other[i]) {
+      const int c = component[std::size_t(m_embedding[std::size_t(anchor[v])].leaf)];
+      if (component[std::size_t(leaf[i])] != c) {
+        leaf[i] = grid->nearest(rest[v], c, component);
+        state[i] = 0;
+      }
+    }
+    m_embedding[v] = fallback_embedding(m_tree, m_root, leaf[i], rest[v]);
+    if (state[i] != 0) m_reuse_from[v] = hints[std::size_t(hint[i])].reuse_from;
+  });
 }
 
 }  // namespace octocut::sim

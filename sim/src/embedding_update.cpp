@@ -3,6 +3,7 @@
 // those of new or changed leaves and the fallback ones are embedded again.
 #include <algorithm>
 #include <bit>
+#include <functional>
 #include <numeric>
 #include <stdexcept>
 #include <string>
@@ -95,35 +96,46 @@ struct SurfaceEmbedding::KeptLeaves {
 };
 
 std::vector<int> SurfaceEmbedding::update(const ObjectModel& new_model, const TriMesh& surface,
-                                          const SurfaceEdit& edit) {
+                                          const SurfaceEdit& edit, Executor* exec) {
   // Validate everything before touching any member but scratch, so that a bad edit leaves the embedding as it was.
   check_update(new_model, surface, edit);
   const std::size_t nv_old = m_embedding.size(), nv_new = surface.vertices.size();
   const auto inserted = std::size_t(edit.inserted);
 
-  // The Z-curve list: delete, renumber, insert (the new vertices are the last ones of S).
-  std::vector<int> map =
-      m_zcurve.update(edit.removed_vertices, std::span<const Vec3>(surface.vertices).subspan(nv_new - inserted));
+  // Two independent parts side by side: (a) the Z-curve list (delete, renumber, insert; the new vertices are the
+  // last ones of S), what the new revision keeps (leaves, and rows of P up to the DOF renumbering), and the vertices
+  // to re-embed, each listed once in m_redo_list: the new ones, the fallback ones, those whose leaf is gone, and
+  // those of new or changed leaves (m_reuse_from: the old vertex whose composed row a vertex keeps, or -1); (b) the
+  // new triangles' adjacency (the triangles were validated above, so (b) cannot fail).
+  std::vector<int> map;
+  KeptLeaves kept;
+  auto vertices = [&] {
+    map = m_zcurve.update(edit.removed_vertices, std::span<const Vec3>(surface.vertices).subspan(nv_new - inserted));
+    kept = match_kept_leaves(new_model);
+    m_redo.assign(nv_new, 0);
+    m_redo_list.clear();
+    m_reuse_from.resize(nv_new);
+    std::size_t first_removed = nv_old;
+    for (const int v : edit.removed_vertices) first_removed = std::min(first_removed, std::size_t(v));
+    move_kept_vertices(map, first_removed, inserted, kept);
+    flag_leaves(new_model.tree(), kept, edit.changed_leaves);
+    std::sort(m_redo_list.begin(), m_redo_list.end());
+    fallback_hints(map, kept);
+  };
+  auto adjacency = [&] { build_adjacency(surface.triangles, nv_new); };
+  if (exec && exec->threads() > 1) {
+    exec->parallel_for(2, 1, [&](int begin, int end) {
+      for (int part = begin; part < end; ++part) (part == 0 ? std::function<void()>(vertices) : adjacency)();
+    });
+  } else {
+    vertices();
+    adjacency();
+  }
 
-  // What the new revision keeps: leaves, and rows of P up to the DOF renumbering.
-  const KeptLeaves kept = match_kept_leaves(new_model);
-
-  // The vertices to re-embed, each listed once in m_redo_list: the new ones, the fallback ones, those whose leaf is
-  // gone, and those of new or changed leaves. m_reuse_from: the old vertex whose composed row a vertex keeps, or -1.
-  m_redo.assign(nv_new, 0);
-  m_redo_list.clear();
-  m_reuse_from.resize(nv_new);
-  std::size_t first_removed = nv_old;
-  for (const int v : edit.removed_vertices) first_removed = std::min(first_removed, std::size_t(v));
-  move_kept_vertices(map, first_removed, inserted, kept);
-  flag_leaves(new_model.tree(), kept, edit.changed_leaves);
-  std::sort(m_redo_list.begin(), m_redo_list.end());
-
-  // Swap in the new tree and the new triangles' adjacency, re-embed the flagged vertices, and compose: kept rows
-  // renumbered, the others anew through the new P.
+  // Swap in the new tree, re-embed the flagged vertices, and compose: kept rows renumbered, the others anew through
+  // the new P.
   if (!kept.same_tree) m_tree = new_model.tree();
-  build_adjacency(surface.triangles, nv_new);
-  embed(new_model, surface, m_redo_list, false);
+  embed(new_model, surface, m_redo_list, false, exec, m_hints, kept.kept_new);
   compose(new_model.dofs(), m_reuse_from, kept.dof_map);
   m_last_reembedded = int(m_redo_list.size());
   return map;
@@ -228,6 +240,20 @@ void SurfaceEmbedding::move_kept_vertices(std::span<const int> map, std::size_t 
   // The inserted vertices come after the kept ones.
   m_embedding.resize(nv_new);
   for (std::size_t i = nv_new - inserted; i < nv_new; ++i) flag(i);
+}
+
+void SurfaceEmbedding::fallback_hints(std::span<const int> map, const KeptLeaves& kept) {
+  m_hints.clear();
+  for (const auto& [v, a] : m_fallback_anchor) {
+    const int k = map[std::size_t(v)];
+    if (k < 0) continue;
+    const int anchor = a >= 0 ? map[std::size_t(a)] : -1;
+    if (a >= 0 && anchor < 0) continue;  // its anchor is gone: nothing to compare with
+    // A fallback vertex keeps its old leaf index until it is re-embedded (move_kept_vertices).
+    const int leaf = kept.old_to_new[std::size_t(m_embedding[std::size_t(k)].leaf)];
+    const int reuse = leaf >= 0 && kept.same_rows[std::size_t(leaf)] ? v : -1;
+    m_hints.push_back({k, leaf, anchor, reuse});
+  }
 }
 
 void SurfaceEmbedding::flag_leaves(const Octree& tree, const KeptLeaves& kept, std::span<const int> changed) {

@@ -563,6 +563,34 @@ void check_component_update_equals_rebuild(int count, bool refine, bool expect_m
   }
 }
 
+// A hinted leaf that is kept must still give way when the cut puts it in another material component than the
+// vertex's anchor. Two points above the right half of one block, tied by a triangle to a vertex of the left surface
+// box, are bound to right-hand leaves while the block is whole; once the gap opens (the same 1 mm leaves, those of
+// the gap gone) their anchor is in the left block, and so must their leaves be.
+TEST(SurfaceEmbedding, UpdateMovesAFallbackVertexWhoseLeafLeftItsAnchorsComponent) {
+  const ObjectModel before = test::box_model({Vec3::Constant(0.002), Vec3::Constant(0.014)}, kRoot.min, kRoot.size, 4);
+  const ObjectModel after = two_blocks_model();
+  TriMesh s = box_surface(kLeftLo, kLeftHi, kBoxQuads);
+  int tie = -1;
+  for (int v = 0; v < int(s.vertices.size()) && tie < 0; ++v)
+    if (s.vertices[std::size_t(v)].x() < 0.006 && s.vertices[std::size_t(v)].z() == kLeftHi.z()) tie = v;
+  ASSERT_GE(tie, 0);
+  const auto f = int32_t(s.vertices.size());
+  s.vertices.push_back(Vec3(0.0083, 0.008, 0.0143));
+  s.vertices.push_back(Vec3(0.0086, 0.009, 0.0143));
+  s.triangles.push_back({tie, f, f + 1});
+  SurfaceEmbedding e(before, s);
+  for (int k = 0; k < 2; ++k) {
+    const VertexEmbedding& ve = e.embeddings()[std::size_t(f + k)];
+    ASSERT_TRUE(ve.fallback);
+    ASSERT_GE(before.root().cell_box(before.tree().leaf(ve.leaf)).min.x(), 0.008);
+  }
+  e.update(after, s, SurfaceEdit{});
+  const SurfaceEmbedding fresh(after, s);
+  expect_same(e, fresh);
+  for (int k = 0; k < 2; ++k) EXPECT_TRUE(in_left_block(after, e.embeddings()[std::size_t(f + k)].leaf));
+}
+
 TEST(SurfaceEmbedding, ComponentFallbackUpdateOneByOneEqualsRebuild) {
   check_component_update_equals_rebuild(10, false, false);
 }
@@ -699,6 +727,65 @@ TEST(SurfaceEmbedding, UpdateOneByOneWithRefinementEqualsRebuild) {
 }
 TEST(SurfaceEmbedding, UpdateMergeEqualsRebuild) { check_update_equals_rebuild(400, true, false, true); }
 TEST(SurfaceEmbedding, UpdateMergeWithRefinementEqualsRebuild) { check_update_equals_rebuild(400, true, true, true); }
+
+// update() keeps a kept fallback vertex's leaf without a search when its anchor is the same and no new leaf is as
+// near, and runs in parallel when given an executor. Loose points scattered outside the material (no anchor: the
+// plain nearest leaf), some next to the refined spot of the cut and most far from it, must be bound as a fresh
+// embedding binds them, with one thread or two.
+TEST(SurfaceEmbedding, UpdateOfScatteredFallbackVerticesEqualsRebuildWithAndWithoutThreads) {
+  const ObjectModel m = hanging_model();
+  TriMesh s = ellipsoid(kCentre, kRadii, 60, 30);
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(0.0, kRoot.size);
+  for (int loose = 0; loose < 300;) {
+    const Vec3 p(u(rng), u(rng), u(rng));
+    if (!embed_vertex(m.tree(), m.root(), p).fallback) continue;
+    s.vertices.push_back(p);
+    ++loose;
+  }
+  SurfaceEmbedding serial(m, s);
+  SurfaceEmbedding parallel = serial;
+  ASSERT_EQ(serial.num_fallback(), 300);
+  const Cut cut = make_cut(m, s, 20, false, true);
+  Executor two(2);
+  serial.update(cut.new_model, cut.surface, cut.edit);
+  parallel.update(cut.new_model, cut.surface, cut.edit, &two);
+  const SurfaceEmbedding fresh(cut.new_model, cut.surface);
+  expect_same(serial, fresh);
+  expect_same(parallel, fresh);
+  EXPECT_EQ(fresh.num_fallback(), serial.num_fallback());
+  // One material component: every fallback vertex is on the leaf that the brute-force scan finds.
+  for (int v = 0; v < fresh.num_vertices(); ++v) {
+    const VertexEmbedding& ve = serial.embeddings()[std::size_t(v)];
+    if (ve.fallback)
+      EXPECT_EQ(ve, embed_vertex(cut.new_model.tree(), cut.new_model.root(), cut.surface.vertices[std::size_t(v)]))
+          << "vertex " << v;
+  }
+}
+
+// A hinted leaf that is kept must still give way to a new leaf that is nearer. The new revision here has material
+// where the old had none (x from 8 to 14 mm; the old leaves are kept as they were): the loose points beyond
+// x = 14 mm, bound before to the old leaves at x = 6..8 mm, now go to the new ones at x = 12..14 mm.
+TEST(SurfaceEmbedding, UpdateMovesAFallbackVertexToANewLeafThatIsNearer) {
+  const ObjectModel before =
+      test::box_model({Vec3::Constant(0.002), Vec3(0.008, 0.014, 0.014)}, kRoot.min, kRoot.size, 3);
+  const ObjectModel after = test::box_model({Vec3::Constant(0.002), Vec3::Constant(0.014)}, kRoot.min, kRoot.size, 3);
+  TriMesh s = ellipsoid(Vec3(0.005, 0.008, 0.008), Vec3(0.002, 0.004, 0.004), 24, 12);
+  for (int i = 0; i < 5; ++i) s.vertices.push_back(Vec3(0.015, 0.003 + 0.002 * i, 0.008));
+  SurfaceEmbedding e(before, s);
+  for (int i = 0; i < 5; ++i) {
+    const VertexEmbedding& ve = e.embeddings()[s.vertices.size() - 5 + std::size_t(i)];
+    ASSERT_TRUE(ve.fallback);
+    EXPECT_LE(before.root().cell_box(before.tree().leaf(ve.leaf)).max.x(), 0.008);
+  }
+  e.update(after, s, SurfaceEdit{});
+  const SurfaceEmbedding fresh(after, s);
+  expect_same(e, fresh);
+  for (int i = 0; i < 5; ++i) {
+    const VertexEmbedding& ve = e.embeddings()[s.vertices.size() - 5 + std::size_t(i)];
+    EXPECT_EQ(after.root().cell_box(after.tree().leaf(ve.leaf)).max.x(), 0.014);
+  }
+}
 
 // Euclidean distance from p to the closed box b, m.
 double box_distance(const Box3& b, const Vec3& p) { return (b.min - p).cwiseMax(p - b.max).cwiseMax(0.0).norm(); }

@@ -197,7 +197,10 @@ class SurfaceEmbedding {
   /// Returns the old-to-new vertex map (-1 for a removed vertex). Throws std::invalid_argument for bad indices, a
   /// surface whose |V| is not the old one less the removed plus the inserted, or a model with another root cube or
   /// no leaf; the embedding is unchanged then.
-  std::vector<int> update(const ObjectModel& new_model, const TriMesh& surface, const SurfaceEdit& edit);
+  /// With `exec` (may be null: serial), independent parts run side by side and the re-embedding is parallel over
+  /// vertices; the result is the same bit for bit whatever the thread count.
+  std::vector<int> update(const ObjectModel& new_model, const TriMesh& surface, const SurfaceEdit& edit,
+                          Executor* exec = nullptr);
   /// Moves to a new revision of the model with the same surface (refinement). Throws std::invalid_argument when
   /// `surface` does not match this embedding, or as update() does.
   void rebind(const ObjectModel& new_model, const TriMesh& surface);
@@ -227,10 +230,25 @@ class SurfaceEmbedding {
   void flag_leaves(const Octree& tree, const KeptLeaves& kept, std::span<const int> changed);
   // update(): marks vertex k (new index) for re-embedding, once; it composes its row anew.
   void flag(std::size_t k);
+  // A kept fallback vertex as update() found it: what it was bound to, in the new numbering.
+  struct FallbackHint {
+    int vertex = -1;      ///< new index
+    int leaf = -1;        ///< its leaf in the new tree, -1 when that leaf is gone
+    int anchor = -1;      ///< its anchor's new index, -1 when it had none
+    int reuse_from = -1;  ///< its old index when the 8 rows of P of `leaf` are kept, else -1
+  };
+  // update(): the hints of the kept fallback vertices (m_fallback_anchor renumbered by `map`, their leaves by `kept`),
+  // into m_hints, ascending by vertex. Call after move_kept_vertices.
+  void fallback_hints(std::span<const int> map, const KeptLeaves& kept);
   // Re-embeds the vertices listed in `redo` (ascending vertex indices) in m_tree, or all of them when `all` is set.
   // Every other vertex must be regularly bound, and the adjacency must be built for surface.triangles (fallback
-  // anchors).
-  void embed(const ObjectModel& model, const TriMesh& surface, std::span<const int> redo, bool all);
+  // anchors). Parallel over vertices with `exec` (may be null).
+  // `hints` (ascending by vertex) and `kept_new` (one entry per leaf, 1 for a leaf of the old tree; empty when the
+  // tree is the old one): a hinted fallback vertex keeps its leaf without a search when its anchor is the same, its
+  // leaf is kept and in its anchor's component, and no new leaf is as near (the kept leaves of a component were in
+  // one component before: a cut never joins material). It then takes the hint's reuse_from.
+  void embed(const ObjectModel& model, const TriMesh& surface, std::span<const int> redo, bool all,
+             Executor* exec = nullptr, std::span<const FallbackHint> hints = {}, std::span<const char> kept_new = {});
   // Composes every vertex through P into the CSR and keeps P's rows for the next update(). Vertex v with
   // reuse_from[v] >= 0 takes the current row of that (old) vertex with its DOFs renumbered by dof_map (old num_dofs),
   // which the caller has shown to equal the row composed anew; empty reuse_from composes all anew. reuse_from must
@@ -273,6 +291,11 @@ class SurfaceEmbedding {
   std::vector<int> m_reuse_from;                   ///< old vertex whose composed row a vertex keeps, or -1 (|V|)
   std::vector<int> m_new_dof;                      ///< compose(): DOFs of the rows composed anew (entries)
   std::vector<double> m_new_weight;                ///< compose(): their weights, dimensionless (entries)
+  std::vector<int> m_anchor;                       ///< embed(): each vertex's anchor, -1 for none (|V|)
+  std::vector<int> m_depth;                        ///< embed(): breadth-first depth of each vertex (|V|)
+  std::vector<FallbackHint> m_hints;               ///< update(): the kept fallback vertices (<= fallback vertices)
+  /// (vertex, anchor) of each fallback vertex, ascending by vertex; anchor -1 for none (the fallback vertices)
+  std::vector<std::pair<int, int>> m_fallback_anchor;
   int m_last_reembedded = 0;
 };
 

@@ -130,6 +130,9 @@ class Simulator {
   [[nodiscard]] bool empty() const { return m_model.num_elements() == 0; }
 
   [[nodiscard]] const ObjectModel& model() const { return m_model; }
+  /// The thread arena of the element loops (`threads` of the options). Other work may use it between steps, as a
+  /// cut does for its surface embedding update.
+  [[nodiscard]] Executor& executor() const { return *m_executor; }
   [[nodiscard]] const SimState& state() const { return m_state; }
   [[nodiscard]] const StabilityStats& stats() const { return m_stats; }
   [[nodiscard]] const SimulatorOptions& options() const { return m_options; }

@@ -566,7 +566,7 @@ class SurfaceTransaction {
   // Removes from S the vertices `unused` (ascending) that no triangle uses: the others move down in order (no
   // allocation; room stays for the next cuts) and the triangles are renumbered in place. Returns the embedding's
   // edit: the removed vertices that S had before this cut, and the number of vertices this cut added that stay.
-  sim::SurfaceEdit compact(std::span<const int32_t> unused) {
+  sim::SurfaceEdit compact(std::span<const int32_t> unused, sim::Executor& exec) {
     std::vector<sim::Vec3>& vs = m_object.surface.vertices;
     sim::SurfaceEdit edit;
     m_unused.assign(unused.begin(), unused.end());
@@ -593,9 +593,13 @@ class SurfaceTransaction {
       if (to >= 0) vs[std::size_t(to)] = vs[std::size_t(v)];
     }
     vs.resize(vs.size() - unused.size());
-    for (auto& t : m_object.surface.triangles)
-      for (int32_t& v : t)
-        if (v > first) v = old_to_new[std::size_t(v - first)];
+    // The triangles renumbered in parallel chunks (each triangle is written once, by one task).
+    auto& triangles = m_object.surface.triangles;
+    exec.parallel_for(int(triangles.size()), 16384, [&](int begin, int end) {
+      for (int f = begin; f < end; ++f)
+        for (int32_t& v : triangles[std::size_t(f)])
+          if (v > first) v = old_to_new[std::size_t(v - first)];
+    });
     m_compacted = true;
     return edit;
   }
@@ -886,7 +890,7 @@ Verdict run_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceEmbedd
   }
   // S compacted once, in place; the embedding follows it (strong guarantee: when it throws, it is unchanged and the
   // transaction restores S).
-  const sim::SurfaceEdit edit = surface.compact(cut.unused);
+  const sim::SurfaceEdit edit = surface.compact(cut.unused, simulator.executor());
   embedding.update(*work.next, object.surface, edit, &simulator.executor());
   out.ms.embedding = ms_since(t0);
   out.ms.solver_update = adopt_model(simulator, stages);

@@ -757,9 +757,10 @@ TEST(SurfaceEmbedding, UpdateOfScatteredFallbackVerticesEqualsRebuildWithAndWith
   // One material component: every fallback vertex is on the leaf that the brute-force scan finds.
   for (int v = 0; v < fresh.num_vertices(); ++v) {
     const VertexEmbedding& ve = serial.embeddings()[std::size_t(v)];
-    if (ve.fallback)
+    if (ve.fallback) {
       EXPECT_EQ(ve, embed_vertex(cut.new_model.tree(), cut.new_model.root(), cut.surface.vertices[std::size_t(v)]))
           << "vertex " << v;
+    }
   }
 }
 

@@ -101,6 +101,7 @@ class CholmodFactor {
   bool factorize(const SpMat& A) {
     if (m_L == nullptr) return false;
     cholmod_sparse a = view(A);
+    serial_openmp_here();  // CHOLMOD's 4-thread OpenMP teams spin against the step on two cores
     cholmod_factorize(&a, m_L, &m_c);
     const bool ok = m_c.status >= CHOLMOD_OK && m_L->minor == m_L->n;
     if (ok && m_keep_single) {

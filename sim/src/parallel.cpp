@@ -31,6 +31,21 @@ void set_blas_threads(int threads) {
   if (set) set(std::max(1, threads));
 }
 
+void serial_openmp_here() {
+  using SetInt = void (*)(int);
+  struct Setters {
+    SetInt dynamic, num_threads, max_active_levels;
+  };
+  static const Setters set{reinterpret_cast<SetInt>(dlsym(RTLD_DEFAULT, "omp_set_dynamic")),
+                           reinterpret_cast<SetInt>(dlsym(RTLD_DEFAULT, "omp_set_num_threads")),
+                           reinterpret_cast<SetInt>(dlsym(RTLD_DEFAULT, "omp_set_max_active_levels"))};
+  // No active level allowed: every region gets one thread at once. Dynamic adjustment with one thread as the
+  // nthreads-var bounds a num_threads clause too, in case this libgomp keeps the levels process-wide.
+  if (set.max_active_levels) set.max_active_levels(0);
+  if (set.dynamic) set.dynamic(1);
+  if (set.num_threads) set.num_threads(1);
+}
+
 Executor::~Executor() = default;
 
 void Executor::parallel_for(int n, int grain, const std::function<void(int, int)>& body) {

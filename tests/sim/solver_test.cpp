@@ -2,6 +2,11 @@
 // ordering); pcg reuses its lagged factor; non-SPD input is reported.
 #include <gtest/gtest.h>
 
+#include <dlfcn.h>
+
+#include <cstdlib>
+#include <thread>
+
 #include <Eigen/Dense>
 
 #include "octocut/sim/fem_system.hpp"
@@ -292,6 +297,40 @@ TEST(LinearSolver, IndefiniteMatrixIsReportedNotCrashing) {
     EXPECT_FALSE(factored && info.ok) << name;
   }
   EXPECT_THROW(make_linear_solver("nope", {}), std::invalid_argument);
+}
+
+// serial_openmp_here() (called before every CHOLMOD factorisation) leaves the calling thread's OpenMP regions one
+// thread: libgomp's own getters report dynamic adjustment and one thread (and no active level) on a thread that
+// factorised; the settings are that thread's, so a fresh thread still has libgomp's defaults. Without libgomp in the
+// process there is nothing to limit (CHOLMOD then has no OpenMP).
+TEST(LinearSolver, FactorisingThreadsStartOpenMpRegionsSerially) {
+  using GetInt = int (*)();
+  const auto get_levels = reinterpret_cast<GetInt>(dlsym(RTLD_DEFAULT, "omp_get_max_active_levels"));
+  const auto get_dynamic = reinterpret_cast<GetInt>(dlsym(RTLD_DEFAULT, "omp_get_dynamic"));
+  const auto get_threads = reinterpret_cast<GetInt>(dlsym(RTLD_DEFAULT, "omp_get_max_threads"));
+  if (get_levels == nullptr || get_dynamic == nullptr || get_threads == nullptr) GTEST_SKIP() << "no libgomp";
+  int levels = -1, dynamic = -1, threads = -1, fresh_dynamic = -1;
+  double residual = 1.0;
+  std::thread([&] {
+    const SpMat A = laplacian(6, 0.2);
+    const VecX b = VecX::LinSpaced(A.rows(), 1.0, 3.0);
+    auto s = make_linear_solver("cholmod", {});
+    s->analyze_pattern(A);
+    if (!s->factorize(A)) return;
+    VecX x;
+    if (s->solve(b, x).ok) residual = (A * x - b).norm() / b.norm();
+    levels = get_levels();
+    dynamic = get_dynamic();
+    threads = get_threads();
+  }).join();
+  std::thread([&] { fresh_dynamic = get_dynamic(); }).join();
+  EXPECT_LT(residual, 1e-12);
+  EXPECT_EQ(dynamic, 1);
+  EXPECT_EQ(threads, 1);
+  EXPECT_EQ(levels, 0);
+  if (std::getenv("OMP_DYNAMIC") == nullptr) {
+    EXPECT_EQ(fresh_dynamic, 0);
+  }
 }
 
 }  // namespace

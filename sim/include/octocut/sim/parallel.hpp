@@ -28,6 +28,14 @@ class Executor {
 /// factorisations, where the dense supernodal kernels gain from it.
 void set_blas_threads(int threads);
 
+/// Makes the OpenMP parallel regions that the calling thread starts run on that thread alone (libgomp found at run
+/// time; a no-op without it). Debian's CHOLMOD runs parts of its supernodal numeric factorisation in OpenMP teams of
+/// a fixed 4 threads (CHOLMOD_OMP_NUM_THREADS, a num_threads clause that omp_set_num_threads cannot lower): on two
+/// cores those teams spin at their barriers against the simulation step, and against each other when a background
+/// factorisation runs beside the step. The limits are per thread in libgomp (dynamic adjustment, one thread, no
+/// active levels), so every thread that factorises calls this first. The parallelism that counts stays in the BLAS.
+void serial_openmp_here();
+
 /// Raises the BLAS to `threads` for its lifetime, then puts it back to one thread.
 class BlasThreadsScope {
  public:

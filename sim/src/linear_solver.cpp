@@ -373,7 +373,7 @@ void retire_factorization(std::unique_ptr<BackgroundFactorization> f) {
 class CholmodSolver final : public LinearSolver {
  public:
   // A failed factorisation is reported through SolveInfo and counted by the caller, not printed by CHOLMOD.
-  CholmodSolver(int threads, bool thorough_ordering) : m_threads(threads) {
+  explicit CholmodSolver(bool thorough_ordering) {
     m_llt.thorough_ordering(thorough_ordering);
   }
   void analyze_pattern(const SpMat& A) override {
@@ -381,7 +381,6 @@ class CholmodSolver final : public LinearSolver {
     m_llt.analyze(A);
   }
   bool factorize(const SpMat& A) override {
-    const BlasThreadsScope blas(m_threads);
     m_ok = m_llt.factorize(A);
     m_A = &A;
     return m_ok;
@@ -400,7 +399,6 @@ class CholmodSolver final : public LinearSolver {
 
  private:
   CholmodFactor m_llt;
-  int m_threads = 1;  ///< BLAS threads while factorising
   const SpMat* m_A = nullptr;
   bool m_ok = false;
 };
@@ -688,11 +686,10 @@ class PcgSolver final : public LinearSolver {
     return true;
   }
 
-  // Factorises the current matrix now, into the front factor (BLAS at m_opt.threads; analysed first when it is not
-  // yet). Drops a background refresh first: its factor would be older than this one.
+  // Factorises the current matrix now, into the front factor (analysed first when it is not yet). Drops a background
+  // refresh first: its factor would be older than this one.
   bool refactor() {
     drop_pending();
-    const BlasThreadsScope blas(m_opt.threads);
     if (!m_front->analyzed()) {
       try {
         m_front->analyze(*m_A);
@@ -845,7 +842,7 @@ class PcgSolver final : public LinearSolver {
 }  // namespace
 
 std::unique_ptr<LinearSolver> make_linear_solver(const std::string& name, const LinearSolverOptions& options) {
-  if (name == "cholmod") return std::make_unique<CholmodSolver>(options.threads, options.thorough_ordering);
+  if (name == "cholmod") return std::make_unique<CholmodSolver>(options.thorough_ordering);
   if (name == "pcg") return std::make_unique<PcgSolver>(options);
   throw std::invalid_argument("unknown linear solver '" + name + "'");
 }

@@ -74,7 +74,6 @@ std::unique_ptr<LinearSolver> Simulator::make_solver(bool initial) const {
   lo.tolerance = m_options.tolerance;
   lo.max_iterations = m_options.max_iterations;
   lo.preconditioner = m_options.preconditioner;
-  lo.threads = m_executor->threads();
   lo.factor_lag_solves = m_options.factor_lag;
   return make_linear_solver(m_options.linear_solver, lo);
 }

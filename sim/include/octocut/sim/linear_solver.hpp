@@ -58,7 +58,6 @@ struct LinearSolverOptions {
   /// solve. The first factor of a pattern, and the refresh after a solve that fails to converge, are always at once.
   int factor_lag_solves = 0;
   std::string preconditioner = "cholesky";  ///< pcg: "cholesky" (lagged factor) | "jacobi"
-  int threads = 1;             ///< BLAS threads during numeric factorisations (one thread otherwise)
   /// Cholesky factors: order with the better (fewer entries of L) of AMD and CHOLMOD's nested dissection instead of
   /// AMD alone. The analysis then takes 5-10 ms more (at a few thousand nodes); a blocky 3D mesh gets a factor with
   /// 20-25 % fewer entries and half the operations (a 10^3 cube), steps 10-30 % faster at 1k-30k elements; the thin

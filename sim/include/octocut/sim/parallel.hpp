@@ -23,9 +23,10 @@ class Executor {
 };
 
 /// Sets the thread count of the BLAS behind CHOLMOD (OpenBLAS on Debian, found at run time; a no-op for other BLAS).
-/// OpenBLAS's idle workers spin with sched_yield after every call that used them, burning a core that the frame
-/// writer or the renderer could use, so octocut keeps the BLAS at one thread and raises it only around numeric
-/// factorisations, where the dense supernodal kernels gain from it.
+/// OpenBLAS's idle workers spin with sched_yield after every call that used them, burning a core that the step, the
+/// frame writer or the renderer could use, so octocut keeps the BLAS at one thread (Executor's constructor sets it):
+/// raising it around numeric factorisations gained nothing measurable, even at 34k DOFs, and cost a core of spinning
+/// (docs/RESULTS.md, "CHOLMOD's OpenMP teams run serially").
 void set_blas_threads(int threads);
 
 /// Makes the OpenMP parallel regions that the calling thread starts run on that thread alone (libgomp found at run
@@ -33,23 +34,8 @@ void set_blas_threads(int threads);
 /// a fixed 4 threads (CHOLMOD_OMP_NUM_THREADS, a num_threads clause that omp_set_num_threads cannot lower): on two
 /// cores those teams spin at their barriers against the simulation step, and against each other when a background
 /// factorisation runs beside the step. The limits are per thread in libgomp (dynamic adjustment, one thread, no
-/// active levels), so every thread that factorises calls this first. The parallelism that counts stays in the BLAS.
+/// active levels), so every thread that factorises calls this first. Factorisations then run on one core each, the
+/// BLAS included (set_blas_threads), and the other core stays with the step.
 void serial_openmp_here();
-
-/// Raises the BLAS to `threads` for its lifetime, then puts it back to one thread.
-class BlasThreadsScope {
- public:
-  explicit BlasThreadsScope(int threads) : m_raise(threads > 1) {
-    if (m_raise) set_blas_threads(threads);
-  }
-  ~BlasThreadsScope() {
-    if (m_raise) set_blas_threads(1);
-  }
-  BlasThreadsScope(const BlasThreadsScope&) = delete;
-  BlasThreadsScope& operator=(const BlasThreadsScope&) = delete;
-
- private:
-  bool m_raise;
-};
 
 }  // namespace octocut::sim

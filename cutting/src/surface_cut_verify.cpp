@@ -132,14 +132,6 @@ void check_vertex_fans(const sim::TriMesh& out, const std::vector<int32_t>& chan
   }
 }
 
-// A sufficient, exact test that triangles s and t meet at most in the vertices they share (by id) and in an edge they
-// share: projected along the axis that s's normal (in doubles) leans on most, with an exact 2D orientation, some
-// edge line of one triangle has that triangle's third corner strictly on one side and every corner of the other
-// strictly on the other side or on the edge itself (a shared corner of it). The projections then meet only in
-// shared corners or the shared edge, and since the first triangle projects one to one, a common point of the two
-// triangles is such a corner or lies on that edge. Dropping a coordinate is exact, so the answer is exact whatever
-// the axis; pieces of one face of S or of one blade facet, nearly coplanar after rounding, end here instead of in
-// the exact arithmetic of the 3D predicates. False says nothing.
 // The orientation of the 2D points a, b, c (doubles, exact inputs): decided in plain doubles when Shewchuk's error
 // bound for orient2d (ccwerrboundA) proves the sign, else by CGAL's exact predicate.
 CGAL::Orientation orientation_2(const Kernel::Point_2& a, const Kernel::Point_2& b, const Kernel::Point_2& c) {
@@ -176,6 +168,14 @@ CGAL::Orientation orientation_3(const Point& p, const Point& q, const Point& r, 
   return CGAL::orientation(p, q, r, s);
 }
 
+// A sufficient, exact test that triangles s and t meet at most in the vertices they share (by id) and in an edge they
+// share: projected along the axis that s's normal (in doubles) leans on most, with an exact 2D orientation, some
+// edge line of one triangle has that triangle's third corner strictly on one side and every corner of the other
+// strictly on the other side or on the edge itself (a shared corner of it). The projections then meet only in
+// shared corners or the shared edge, and since the first triangle projects one to one, a common point of the two
+// triangles is such a corner or lies on that edge. Dropping a coordinate is exact, so the answer is exact whatever
+// the axis; pieces of one face of S or of one blade facet, nearly coplanar after rounding, end here instead of in
+// the exact arithmetic of the 3D predicates. False says nothing.
 template <class Pos>
 bool separated_in_projection(const Pos& P, const Tri& s, const Tri& t) {
   using Point2 = Kernel::Point_2;
@@ -238,7 +238,7 @@ bool ids_intersect(const Pos& P, const Tri& s, const Tri& t) {
     // triangle (which touches that line only along the edge) in the shared edge alone. (Degenerate triangles are
     // reported by their own test; coplanar_orientation requires a, b, c not collinear.)
     if (CGAL::collinear(a, b, c) || CGAL::collinear(a, b, d)) return false;
-    return CGAL::coplanar(a, b, c, d) && CGAL::coplanar_orientation(a, b, c, d) == CGAL::POSITIVE;
+    return CGAL::coplanar_orientation(a, b, c, d) == CGAL::POSITIVE;  // coplanar: decided exactly above
   }
   if (shared == 1) {
     // Shared vertex v: when the other two corners of one triangle lie strictly on one side of the other's plane, the

@@ -113,7 +113,6 @@ struct FemSystem::Impl {
   std::vector<int> pair_offsets;                  // per element, per (p, q) entry pair: 3 column offsets, or -1
   std::vector<std::size_t> pair_begin;            // start of each element's pair offsets (num_elements + 1)
   std::vector<int> diag_offsets;                  // per scalar DOF: offset of its diagonal entry (3 num_dofs)
-  std::vector<double> rotated;                    // per element R K R^T, scaled (num_elements x 576)
   // The scatter's parts: part t owns the matrix columns (and coupling rows) of DOFs [part_dof[t], part_dof[t + 1]),
   // and lists, ascending, the elements that touch them. Rebuilt with the pattern or when the thread count changes.
   std::vector<int> part_dof;
@@ -139,13 +138,17 @@ struct FemSystem::Impl {
     }
   }
 
-  // Adds the rotated element matrices' entries whose column DOF lies in [lo, hi) to A's values, and their
-  // prescribed-column terms whose row DOF lies there to `coupling`, over `elements` in ascending order: every sum
-  // then runs in the same order as one serial pass over all elements, whatever the parts.
-  void scatter(const std::vector<int>& elements, int lo, int hi, const std::vector<char>& constrained, const VecX& u,
-               double* val, VecX& coupling) const {
+  // Adds the rotated element matrices kc R K R^T (computed here, per element, into a buffer that stays in cache)
+  // entries whose column DOF lies in [lo, hi) to A's values, and their prescribed-column terms whose row DOF lies
+  // there to `coupling`, over `elements` in ascending order: every sum then runs in the same order as one serial
+  // pass over all elements, whatever the parts.
+  void scatter(const std::vector<int>& elements, int lo, int hi, double kc, const ElementFrame& frame,
+               const std::vector<char>& constrained, const VecX& u, double* val, VecX& coupling) const {
+    const Mat24& unit_k = model().unit_stiffness();
+    const std::vector<double>& scale = model().stiffness_scale();
+    Mat24 Ke;
     for (const int e : elements) {
-      const Eigen::Map<const Mat24> Ke(rotated.data() + 576 * std::size_t(e));
+      corotated_stiffness(unit_k, frame.rotation[std::size_t(e)], kc * scale[std::size_t(e)], Ke);
       const auto& g = gather[std::size_t(e)];
       const int* off = pair_offsets.data() + pair_begin[std::size_t(e)];
       for (const GatherEntry& p : g) {
@@ -341,14 +344,14 @@ void FemSystem::force_and_product(const std::vector<Vec3>& x, const ElementFrame
     for (int e = b; e < en; ++e) {
       element_slots(slots, e, xe, xm);
       const Mat3& R = frame.rotation[std::size_t(e)];
-      const Mat24 K = m_impl->element_k(e);
-      fe[std::size_t(e)] = corotated_force(K, R, xe, m_impl->rest[std::size_t(e)]);
+      const double s = m.stiffness_scale()[std::size_t(e)];  // K = s K_unit
+      fe[std::size_t(e)] = s * corotated_force(m.unit_stiffness(), R, xe, m_impl->rest[std::size_t(e)]);
       if (want_kv) {
         // K_rot v = R K R^T v, applied block-wise without forming K_rot.
         const Vec24 ve = m_impl->element_vector(e, v);
         Vec24 local;
         for (int a = 0; a < 8; ++a) local.segment<3>(3 * a) = R.transpose() * ve.segment<3>(3 * a);
-        const Vec24 kl = K * local;
+        const Vec24 kl = s * (m.unit_stiffness() * local);
         for (int a = 0; a < 8; ++a) kve[std::size_t(e)].segment<3>(3 * a) = R * kl.segment<3>(3 * a);
       }
     }
@@ -423,17 +426,9 @@ void FemSystem::assemble_system(double mc, double kc, const ElementFrame& frame,
   }
   if (A.nonZeros() != im.pattern.nonZeros()) A = im.pattern;
 
-  // Rotated element stiffness, in parallel (independent per element).
-  im.rotated.resize(std::size_t(ne) * 576);
-  im.executor_ptr->parallel_for(ne, kGrain, [&](int b, int en) {
-    for (int e = b; e < en; ++e) {
-      Eigen::Map<Mat24> out(im.rotated.data() + 576 * std::size_t(e));
-      out = corotated_stiffness(kc * im.element_k(e), frame.rotation[std::size_t(e)]);
-    }
-  });
-
-  // Scatter, by parts of the DOFs in parallel, each part in ascending element order: the same sums, in the same
-  // order, as one serial pass (bit-identical for any thread count).
+  // Rotate and scatter, by parts of the DOFs in parallel, each part in ascending element order: the same sums, in
+  // the same order, as one serial pass (bit-identical for any thread count). An element that touches two parts is
+  // rotated by both: cheaper than a pass that stores every element's 24 x 24 matrix for the scatter to read back.
   double* val = A.valuePtr();
   std::fill(val, val + A.nonZeros(), 0.0);
   coupling.setZero(3 * nd);
@@ -444,8 +439,8 @@ void FemSystem::assemble_system(double mc, double kc, const ElementFrame& frame,
   }
   im.executor_ptr->parallel_for(parts, 1, [&](int tb, int te) {
     for (int t = tb; t < te; ++t)
-      im.scatter(im.part_elements[std::size_t(t)], im.part_dof[std::size_t(t)], im.part_dof[std::size_t(t) + 1],
-                 constrained, u, val, coupling);
+      im.scatter(im.part_elements[std::size_t(t)], im.part_dof[std::size_t(t)], im.part_dof[std::size_t(t) + 1], kc,
+                 frame, constrained, u, val, coupling);
   });
 
   // Lumped mass on the diagonal; identity rows for constrained DOFs.

@@ -92,7 +92,48 @@ Mat3 hex_center_gradient(const Eigen::Matrix<double, 3, 8>& x, double h) {
   return F / h;
 }
 
+namespace {
+// The rotation of F = R S by Newton's iteration X <- (g X + (g X)^-T) / 2 (Higham 1986), with the determinant
+// scaling g = |det X|^(-1/3) while far from converged. For det F > 0 it converges quadratically to the orthogonal
+// polar factor, which is then the rotation that the SVD below gives (U V^T has det +1, no sign correction). Returns
+// false, leaving R unset, when F is inverted or nearly singular (det F <= 1e-3 |F|_F^3; the identity has 0.19) or
+// when 24 iterations do not converge: the SVD decides those.
+bool newton_polar_rotation(const Mat3& F, Mat3& R) {
+  const double fn = F.norm();
+  const double det = F.determinant();
+  if (!std::isfinite(det) || !(det > 1e-3 * fn * fn * fn)) return false;
+  Mat3 X = F;
+  double d = det;
+  bool scale = true;
+  for (int it = 0; it < 24; ++it) {
+    // X^-T = cofactor(X) / det X.
+    Mat3 cof;
+    cof.col(0) = X.col(1).cross(X.col(2));
+    cof.col(1) = X.col(2).cross(X.col(0));
+    cof.col(2) = X.col(0).cross(X.col(1));
+    const double g = scale ? 1.0 / std::cbrt(d) : 1.0;
+    const Mat3 Y = 0.5 * (g * X + cof / (g * d));
+    const double delta = (Y - X).norm();
+    X = Y;
+    if (delta < 1e-9) {
+      // Quadratic convergence: one more step brings the error below round-off.
+      cof.col(0) = X.col(1).cross(X.col(2));
+      cof.col(1) = X.col(2).cross(X.col(0));
+      cof.col(2) = X.col(0).cross(X.col(1));
+      R = 0.5 * (X + cof / X.determinant());
+      return true;
+    }
+    scale = delta > 1e-2;
+    d = X.determinant();
+    if (!(d > 0.0)) return false;
+  }
+  return false;
+}
+}  // namespace
+
 Mat3 polar_rotation(const Mat3& F) {
+  Mat3 R;
+  if (newton_polar_rotation(F, R)) return R;
   Eigen::JacobiSVD<Mat3> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
   Mat3 U = svd.matrixU();
   const Mat3& V = svd.matrixV();
@@ -124,16 +165,21 @@ Vec24 corotated_force(const Mat24& K, const Mat3& R, const Vec24& x, const Vec24
   return f;
 }
 
-Mat24 corotated_stiffness(const Mat24& K, const Mat3& R) {
+void corotated_stiffness(const Mat24& K, const Mat3& R, double c, Mat24& out) {
   // K is symmetric, so block (b, a) of R K R^T is the transpose of block (a, b): compute the upper blocks only.
-  Mat24 out;
+  const Mat3 cRt = c * R.transpose();
   for (int a = 0; a < 8; ++a) {
     for (int b = a; b < 8; ++b) {
-      const Mat3 blk = R * K.block<3, 3>(3 * a, 3 * b) * R.transpose();
+      const Mat3 blk = R * K.block<3, 3>(3 * a, 3 * b) * cRt;
       out.block<3, 3>(3 * a, 3 * b) = blk;
       if (b != a) out.block<3, 3>(3 * b, 3 * a) = blk.transpose();
     }
   }
+}
+
+Mat24 corotated_stiffness(const Mat24& K, const Mat3& R) {
+  Mat24 out;
+  corotated_stiffness(K, R, 1.0, out);
   return out;
 }
 

@@ -26,6 +26,39 @@ namespace octocut::sim {
 
 namespace {
 
+// y = A x for a symmetric A stored with both triangles (the FEM system's: each pair of blocks is written from one
+// element matrix and its transpose, in the same element order). Column i is read as row i, so each y_i is one dot
+// product over a contiguous range (four partial sums, no scattered stores), split into row ranges on the executor's
+// threads when one is given: the same sums in the same order whatever the thread count.
+void symmetric_product(const SpMat& A, const VecX& x, VecX& y, Executor* executor) {
+  const int n = int(A.cols());
+  y.resize(n);
+  const int* outer = A.outerIndexPtr();
+  const int* inner = A.innerIndexPtr();
+  const double* val = A.valuePtr();
+  const double* xp = x.data();
+  double* yp = y.data();
+  const auto rows = [&](int b, int e) {
+    for (int i = b; i < e; ++i) {
+      double s[4] = {0.0, 0.0, 0.0, 0.0};
+      int k = outer[i];
+      const int end = outer[i + 1];
+      for (; k + 4 <= end; k += 4) {
+        s[0] += val[k] * xp[inner[k]];
+        s[1] += val[k + 1] * xp[inner[k + 1]];
+        s[2] += val[k + 2] * xp[inner[k + 2]];
+        s[3] += val[k + 3] * xp[inner[k + 3]];
+      }
+      for (; k < end; ++k) s[0] += val[k] * xp[inner[k]];
+      yp[i] = (s[0] + s[1]) + (s[2] + s[3]);
+    }
+  };
+  if (executor == nullptr || executor->threads() <= 1 || n < 4096)
+    rows(0, n);
+  else
+    executor->parallel_for(n, 2048, rows);
+}
+
 // Supernodal LL^T through CHOLMOD, called directly so that the symbolic analysis can run on the block graph. The
 // FEM system matrix is made of dense 3 x 3 blocks (one per pair of coupled DOFs). Its fill-reducing ordering (AMD)
 // and its supernodal symbolic factorisation are computed on the graph of blocks (num_dofs nodes, 9x fewer entries
@@ -671,6 +704,7 @@ class PcgSolver final : public LinearSolver {
   }
   std::string name() const override { return "pcg"; }
   int ordering_block_size() const override { return m_use_cholesky ? m_front->block_size() : 0; }
+  void set_executor(Executor* executor) override { m_executor = executor; }
 
  private:
   // The first factorize() of a pattern after a cut, with an inherited factor: the bridge preconditions the solves
@@ -795,7 +829,9 @@ class PcgSolver final : public LinearSolver {
       info.ok = std::isfinite(bn);
       return;
     }
-    VecX r = b - A * x;
+    VecX r;
+    symmetric_product(A, x, r, m_executor);
+    r = b - r;
     double rn = r.norm();
     VecX z, p, Ap;
     precondition(r, z);
@@ -803,7 +839,7 @@ class PcgSolver final : public LinearSolver {
     double rz = r.dot(z);
     int it = 0;
     while (rn / bn > m_opt.tolerance && it < max_iterations) {
-      Ap.noalias() = A * p;
+      symmetric_product(A, p, Ap, m_executor);
       const double pAp = p.dot(Ap);
       // A non-positive curvature means A (or the preconditioner) is not SPD.
       if (!(pAp > 0.0) || !(rz > 0.0) || !std::isfinite(rz)) break;
@@ -837,6 +873,7 @@ class PcgSolver final : public LinearSolver {
   int m_baseline = 0;   ///< fewest iterations of a solve one step or more after the factorisation
   VecX m_inv_diag;
   const SpMat* m_A = nullptr;
+  Executor* m_executor = nullptr;  ///< runs the products with A (null: the calling thread)
 };
 
 }  // namespace

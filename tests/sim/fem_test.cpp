@@ -55,6 +55,26 @@ TEST(HexElement, PolarRotationIsProperForInvertedAndDegenerateGradients) {
   EXPECT_LT((polar_rotation(Q * Vec3(1.5, 0.7, 1.1).asDiagonal()) - Q).norm(), 1e-12);
 }
 
+// The Newton path of polar_rotation (det F > 0, well conditioned) recovers the rotation Q of F = Q S for symmetric
+// positive definite stretches S with stretch ratios up to 1:250, to round-off; the rotation is proper and
+// orthonormal. Reference: Q itself (F is built from it).
+TEST(HexElement, PolarRotationRecoversTheRotationOfStretchedRotations) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> angle(-3.1, 3.1), stretch(0.2, 2.0);
+  std::normal_distribution<double> n;
+  for (int i = 0; i < 500; ++i) {
+    const Mat3 Q = Eigen::AngleAxisd(angle(rng), Vec3(n(rng), n(rng), n(rng)).normalized()).toRotationMatrix();
+    const Mat3 V = Eigen::AngleAxisd(angle(rng), Vec3(n(rng), n(rng), n(rng)).normalized()).toRotationMatrix();
+    Vec3 s(stretch(rng), stretch(rng), stretch(rng));
+    if (i % 4 == 0) s[i % 3] *= 0.04;  // strongly flattened
+    const Mat3 S = V * s.asDiagonal() * V.transpose();
+    const Mat3 R = polar_rotation(Q * S);
+    EXPECT_LT((R - Q).norm(), 1e-11 * s.maxCoeff() / s.minCoeff()) << "case " << i;
+    EXPECT_NEAR(R.determinant(), 1.0, 1e-13);
+    EXPECT_LT((R.transpose() * R - Mat3::Identity()).norm(), 1e-13);
+  }
+}
+
 // A model with hanging nodes: a box refined unevenly.
 ObjectModel hanging_model(HexFormulation element = HexFormulation::trilinear) {
   MaterialParams p;

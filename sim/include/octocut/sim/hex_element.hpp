@@ -33,8 +33,9 @@ Mat24 unit_hex_stiffness(double nu, HexFormulation f);
 /// Deformation gradient at the centre of a cube of edge h (m) whose 8 corners are at x (m, 3 x 8 columns).
 Mat3 hex_center_gradient(const Eigen::Matrix<double, 3, 8>& x, double h);
 
-/// Rotation of the polar decomposition F = R S, robust to inverted and degenerate F: SVD with the sign correction
-/// of Irving et al. 2004, so that det R = +1 always.
+/// Rotation of the polar decomposition F = R S, robust to inverted and degenerate F: det R = +1 always. Scaled
+/// Newton iteration for well-conditioned F with det F > 0; otherwise SVD with the sign correction of Irving et al.
+/// 2004 (flip the direction of the smallest singular value).
 Mat3 polar_rotation(const Mat3& F);
 
 /// Corotated displacement R^T (x - x_c) - (X - X_c) of the 8 corners relative to their centroids (m, 24).
@@ -45,5 +46,8 @@ Vec24 corotated_force(const Mat24& K, const Mat3& R, const Vec24& x, const Vec24
 
 /// The corotated stiffness R K R^T (24 x 24).
 Mat24 corotated_stiffness(const Mat24& K, const Mat3& R);
+
+/// out = c R K R^T (24 x 24), written in place (K symmetric).
+void corotated_stiffness(const Mat24& K, const Mat3& R, double c, Mat24& out);
 
 }  // namespace octocut::sim

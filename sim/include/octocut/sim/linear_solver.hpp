@@ -8,6 +8,8 @@
 
 namespace octocut::sim {
 
+class Executor;
+
 /// What one solve did.
 struct SolveInfo {
   bool ok = false;         ///< converged (pcg) or factor valid (cholmod)
@@ -38,6 +40,9 @@ class LinearSolver {
   /// preconditions its first solves with it through T while the new pattern's first factor is computed in the
   /// background; the others ignore it. `previous` is then left without a factor.
   virtual void inherit(LinearSolver& previous, const SpMat& transfer) {}
+  /// The executor whose threads the solver may use for its products with A (pcg), or null for the calling thread
+  /// alone. The executor must outlive the solver or be replaced first.
+  virtual void set_executor(Executor* executor) {}
 };
 
 struct LinearSolverOptions {

@@ -159,6 +159,8 @@ class Simulator {
   bool solve_increment(double dt, const VecX& dv_c, VecX& dv);
   // Checks the state that dv gives and commits it, advancing t by dt.
   bool commit_step(double dt, const VecX& dv, const std::vector<Vec3>& target);
+  /// dv = the start of the solve of a step of dt (m/s, 3 num_dofs), from the last steps' increments.
+  void warm_start(double dt, VecX& dv) const;
   // The defined reset after a step failed at the smallest dt, from the step's start state.
   void reset_failed_step(const SimState& start);
   // The linear solver's symbolic analysis of m_A, once per revision.
@@ -189,6 +191,11 @@ class Simulator {
   SpMat m_A;                         ///< system matrix with the fixed pattern of this revision
   bool m_pattern_analyzed = false;
   VecX m_dv_prev;                    ///< last step's velocity increment, warm start (3 num_dofs)
+  /// The increments of the two steps before the last (m/s, 3 num_dofs each) and how many of the last steps, up to
+  /// 3, ran this revision at one Δt (m_history_dt, s) in a row: the warm start extrapolates along them.
+  VecX m_dv_prev2, m_dv_prev3;
+  int m_history = 0;
+  double m_history_dt = 0.0;
   std::vector<Contact> m_contacts;   ///< contacts of the next (or current) step
   std::vector<ContactOutcome> m_outcomes;  ///< what they did in the last step
   ContactEnergy m_contact_energy;          ///< their work and penalty energy change over the last step

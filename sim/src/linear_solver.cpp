@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <future>
+#include <iterator>
 #include <memory>
 #include <mutex>
 #include <stdexcept>
@@ -387,6 +388,7 @@ struct BackgroundFactorization {
   std::future<bool> done;                 ///< whether it succeeded
   int solves = 0;                         ///< solves begun since it started
   double iteration_flops = 0.0;           ///< PCG operations of those solves
+  std::vector<int> fast;                  ///< the fast DOFs of A (set_fast_dofs)
 };
 
 // Background factorisations whose solver no longer wants them (replaced after a cut, or refreshed at once) are kept
@@ -436,18 +438,105 @@ class CholmodSolver final : public LinearSolver {
   bool m_ok = false;
 };
 
+// An exact solve on a region C of the DOFs, combined with a global preconditioner G multiplicatively and
+// symmetrically (local, global, local: symmetric multiplicative Schwarz), with L = E_C A_CC^-1 E_C^T:
+//   z1 = L r,  z2 = z1 + G (r - A z1),  z = z2 + L (r - A z2).
+// Symmetric by construction; positive definite while G A's spectrum, on the vectors the local solves leave, stays
+// within (0, 2), as it does when G is a (lagged) inverse of A wherever A changed only off C. The local products read
+// A's columns of C only (A symmetric), so an application costs one application of G, two small local solves and
+// products with A's columns of C. A_CC is factorised at each build(); its analysis is kept while C stays the same.
+class LocalSolve {
+ public:
+  /// Factorises A restricted to the DOFs `dofs` (ascending, 3 x 3 blocked A). False when that fails (A_CC not
+  /// positive definite, out of memory): then the region is empty.
+  bool build(const SpMat& A, std::vector<int> dofs) {
+    if (dofs.empty()) {
+      m_dofs.clear();
+      return true;
+    }
+    const SpMat Al = restrict_to(A, dofs);
+    try {
+      if (dofs != m_dofs || !m_factor.analyzed()) m_factor.analyze(Al);
+      m_dofs = std::move(dofs);
+      if (m_factor.factorize(Al)) return true;
+    } catch (const std::exception&) {
+    }
+    m_dofs.clear();
+    m_factor.clear();
+    return false;
+  }
+  [[nodiscard]] bool empty() const { return m_dofs.empty(); }
+  [[nodiscard]] const std::vector<int>& dofs() const { return m_dofs; }
+  /// z = the combination applied to r (see the class comment); global(r, w) sets w = G r.
+  template <class Global>
+  void apply(const SpMat& A, const VecX& r, VecX& z, Global&& global) {
+    // z1 = L r; r1 = r - A z1 (z1 lives on C: A's columns of C).
+    gather_local(r, m_rl);
+    solve_local(m_rl);
+    z.setZero(r.size());
+    m_r1 = r;
+    for (std::size_t i = 0; i < m_dofs.size(); ++i)
+      for (int c = 0; c < 3; ++c) {
+        const Eigen::Index col = 3 * Eigen::Index(m_dofs[i]) + c;
+        const double v = m_zl[3 * Eigen::Index(i) + c];
+        z[col] = v;
+        for (SpMat::InnerIterator it(A, col); it; ++it) m_r1[it.row()] -= it.value() * v;
+      }
+    // z2 = z1 + G r1.
+    global(m_r1, m_w);
+    z += m_w;
+    // z = z2 + L (r - A z2), where (r - A z2)_C = (r1 - A G r1)_C: A's columns of C against G r1.
+    for (std::size_t i = 0; i < m_dofs.size(); ++i)
+      for (int c = 0; c < 3; ++c) {
+        const Eigen::Index col = 3 * Eigen::Index(m_dofs[i]) + c;
+        double aw = 0.0;
+        for (SpMat::InnerIterator it(A, col); it; ++it) aw += it.value() * m_w[it.row()];
+        m_rl[3 * Eigen::Index(i) + c] = m_r1[col] - aw;
+      }
+    solve_local(m_rl);
+    for (std::size_t i = 0; i < m_dofs.size(); ++i)
+      z.segment<3>(3 * m_dofs[i]) += m_zl.segment<3>(3 * Eigen::Index(i));
+  }
+
+ private:
+  // rl = r restricted to C.
+  void gather_local(const VecX& r, VecX& rl) const {
+    rl.resize(3 * Eigen::Index(m_dofs.size()));
+    for (std::size_t i = 0; i < m_dofs.size(); ++i) rl.segment<3>(3 * Eigen::Index(i)) = r.segment<3>(3 * m_dofs[i]);
+  }
+  // m_zl = A_CC^-1 rl (zero when CHOLMOD fails: the application then relies on G).
+  void solve_local(const VecX& rl) {
+    if (!m_factor.solve(rl, m_zl)) m_zl.setZero(rl.size());
+  }
+  // A's rows and columns of the DOFs `dofs` (ascending), both triangles, 3 x 3 blocked.
+  static SpMat restrict_to(const SpMat& A, const std::vector<int>& dofs) {
+    std::vector<int> map(std::size_t(A.rows() / 3), -1);
+    for (std::size_t i = 0; i < dofs.size(); ++i) map[std::size_t(dofs[i])] = int(i);
+    std::vector<Eigen::Triplet<double>> t;
+    for (std::size_t i = 0; i < dofs.size(); ++i)
+      for (int c = 0; c < 3; ++c)
+        for (SpMat::InnerIterator it(A, 3 * dofs[i] + c); it; ++it) {
+          const int j = map[std::size_t(it.row() / 3)];
+          if (j >= 0) t.emplace_back(3 * j + int(it.row() % 3), 3 * int(i) + c, it.value());
+        }
+    SpMat out(3 * Eigen::Index(dofs.size()), 3 * Eigen::Index(dofs.size()));
+    out.setFromTriplets(t.begin(), t.end());
+    return out;
+  }
+
+  std::vector<int> m_dofs;   ///< the region C, ascending
+  CholmodFactor m_factor;    ///< of A restricted to C
+  VecX m_rl, m_zl;           ///< work: r, z on C
+  VecX m_r1, m_w;            ///< work: r - A z1, G r1 (3 num_dofs)
+};
+
 // The preconditioner of the solves right after a cut, before the new pattern has a factor of its own. Two parts:
 // the old revision's lagged factor F_old, reached through the transfer T of DOF values from the old revision to the
 // new (transfer_matrix), covers everything the old discretisation can represent: G = T F_old^-1 T^T; an exact solve on
 // the cut's region C covers what the cut added there (refined DOFs, which no old DOF copies, and split ones, which
-// share their old DOF, with the DOFs coupled to them in A): L = E_C A_CC^-1 E_C^T, A_CC factorised once (at the
-// bridge's first matrix). They are combined multiplicatively and symmetrically (local, global, local: symmetric
-// multiplicative Schwarz), which is symmetric by construction and positive definite while G A's spectrum stays within
-// (0, 2), as it does when G is a (lagged) inverse on range(T):
-//   z1 = L r,  z2 = z1 + G (r - A z1),  z = z2 + L (r - A z2).
-// Every DOF off C is a plain copy of one old DOF, so G and L together reach every DOF. The local products read A's
-// columns of C only (A symmetric), so an application costs one solve with F_old, two small local solves and one full
-// vector of T products. On the 50k meniscus after a punch PCG needs 4-7 iterations with it, where the earlier additive
+// share their old DOF, with the DOFs coupled to them in A), factorised at the bridge's first matrix. They are combined
+// as LocalSolve does (local, global, local); every DOF off C is a plain copy of one old DOF, so G and L together
+// reach every DOF. On the 50k meniscus after a punch PCG needs 4-7 iterations with it, where the earlier additive
 // combination (G + L + block Jacobi) needed 13-22 and a factorisation costs about 58. Should the combination not be
 // positive definite after all, PCG notices (non-positive curvature) and the solver falls back to a factor.
 class CutBridge {
@@ -460,49 +549,15 @@ class CutBridge {
   bool build(const SpMat& A) {
     const Eigen::Index nb = A.rows() / 3;
     if (A.rows() % 3 != 0 || m_transfer.rows() != nb || !m_factor) return false;
-    m_local = cut_region(A);
-    if (m_local.empty()) return true;
-    const SpMat Al = restrict_to(A, m_local);
-    try {
-      m_local_factor.analyze(Al);
-      return m_local_factor.factorize(Al);  // without it, G alone would miss the cut's new DOFs
-    } catch (const std::exception&) {
-      return false;
-    }
+    return m_local.build(A, cut_region(A));  // false without its factor: G alone would miss the cut's new DOFs
   }
   /// z = the bridge applied to r for the system matrix A (see the class comment); F_old's triangular solves in single
   /// precision if asked.
   void apply(const SpMat& A, const VecX& r, VecX& z, bool single) {
-    if (m_local.empty()) {
+    if (m_local.empty())
       apply_global(r, z, single);
-      return;
-    }
-    // z1 = L r; r1 = r - A z1 (z1 lives on C: A's columns of C).
-    gather_local(r, m_rl);
-    solve_local(m_rl);
-    z.setZero(r.size());
-    m_r1 = r;
-    for (std::size_t i = 0; i < m_local.size(); ++i)
-      for (int c = 0; c < 3; ++c) {
-        const Eigen::Index col = 3 * Eigen::Index(m_local[i]) + c;
-        const double v = m_zl[3 * Eigen::Index(i) + c];
-        z[col] = v;
-        for (SpMat::InnerIterator it(A, col); it; ++it) m_r1[it.row()] -= it.value() * v;
-      }
-    // z2 = z1 + G r1.
-    apply_global(m_r1, m_w, single);
-    z += m_w;
-    // z = z2 + L (r - A z2), where (r - A z2)_C = (r1 - A G r1)_C: A's columns of C against G r1.
-    for (std::size_t i = 0; i < m_local.size(); ++i)
-      for (int c = 0; c < 3; ++c) {
-        const Eigen::Index col = 3 * Eigen::Index(m_local[i]) + c;
-        double aw = 0.0;
-        for (SpMat::InnerIterator it(A, col); it; ++it) aw += it.value() * m_w[it.row()];
-        m_rl[3 * Eigen::Index(i) + c] = m_r1[col] - aw;
-      }
-    solve_local(m_rl);
-    for (std::size_t i = 0; i < m_local.size(); ++i)
-      z.segment<3>(3 * m_local[i]) += m_zl.segment<3>(3 * Eigen::Index(i));
+    else
+      m_local.apply(A, r, z, [&](const VecX& rr, VecX& w) { apply_global(rr, w, single); });
   }
 
  private:
@@ -519,16 +574,6 @@ class CutBridge {
       for (SpMat::InnerIterator it(m_transfer, j); it; ++it)
         w.segment<3>(3 * it.row()) += it.value() * m_zc.segment<3>(3 * j);
   }
-  // rl = r restricted to C.
-  void gather_local(const VecX& r, VecX& rl) const {
-    rl.resize(3 * Eigen::Index(m_local.size()));
-    for (std::size_t i = 0; i < m_local.size(); ++i) rl.segment<3>(3 * Eigen::Index(i)) = r.segment<3>(3 * m_local[i]);
-  }
-  // m_zl = A_CC^-1 rl (zero when CHOLMOD fails: the step then relies on G).
-  void solve_local(const VecX& rl) {
-    if (!m_local_factor.solve(rl, m_zl)) m_zl.setZero(rl.size());
-  }
-
   // The DOFs of the cut's region (see the class comment), ascending.
   std::vector<int> cut_region(const SpMat& A) const {
     const Eigen::Index nb = A.rows() / 3;
@@ -556,28 +601,10 @@ class CutBridge {
       if (grown[std::size_t(k)]) out.push_back(int(k));
     return out;
   }
-  // A's rows and columns of the DOFs `dofs` (ascending), both triangles, 3 x 3 blocked.
-  static SpMat restrict_to(const SpMat& A, const std::vector<int>& dofs) {
-    std::vector<int> map(std::size_t(A.rows() / 3), -1);
-    for (std::size_t i = 0; i < dofs.size(); ++i) map[std::size_t(dofs[i])] = int(i);
-    std::vector<Eigen::Triplet<double>> t;
-    for (std::size_t i = 0; i < dofs.size(); ++i)
-      for (int c = 0; c < 3; ++c)
-        for (SpMat::InnerIterator it(A, 3 * dofs[i] + c); it; ++it) {
-          const int j = map[std::size_t(it.row() / 3)];
-          if (j >= 0) t.emplace_back(3 * j + int(it.row() % 3), 3 * int(i) + c, it.value());
-        }
-    SpMat out(3 * Eigen::Index(dofs.size()), 3 * Eigen::Index(dofs.size()));
-    out.setFromTriplets(t.begin(), t.end());
-    return out;
-  }
-
   std::unique_ptr<CholmodFactor> m_factor;  ///< the old revision's lagged factor (3 old num_dofs)
   SpMat m_transfer;                         ///< new x old DOFs (transfer_matrix)
-  std::vector<int> m_local;                 ///< the cut's region C, ascending
-  CholmodFactor m_local_factor;             ///< of A restricted to C (at the bridge's first matrix)
-  VecX m_rc, m_zc, m_rl, m_zl;              ///< work: T^T r, F_old^-1 T^T r (3 old num_dofs); r, z on C
-  VecX m_r1, m_w;                           ///< work: r - A z1, G r1 (3 new num_dofs)
+  LocalSolve m_local;                       ///< the exact solve on the cut's region (at the bridge's first matrix)
+  VecX m_rc, m_zc;                          ///< work: T^T r, F_old^-1 T^T r (3 old num_dofs)
 };
 
 // Conjugate gradients, warm-started from x, with either a lagged Cholesky factor of an earlier system matrix or
@@ -676,6 +703,7 @@ class PcgSolver final : public LinearSolver {
       cap = int(std::min<double>(cap, 1.0 + std::floor(purchase_price() / iteration_flops())));
     else if (m_use_cholesky && !own_factor && m_solves_since_factor >= 2)
       cap = int(std::min<double>(cap, m_baseline + 1.0 + std::floor(purchase_price() / iteration_flops())));
+    prepare_fast_region();
     run_pcg(b, x, info, cap);
     if (!m_use_cholesky) return info;
     if (!m_pending)
@@ -694,6 +722,7 @@ class PcgSolver final : public LinearSolver {
       }
       info.refactorized = true;
       SolveInfo again;
+      prepare_fast_region();
       run_pcg(b, x, again, m_opt.max_iterations);
       info.ok = again.ok;
       info.iterations += again.iterations;
@@ -705,6 +734,7 @@ class PcgSolver final : public LinearSolver {
   std::string name() const override { return "pcg"; }
   int ordering_block_size() const override { return m_use_cholesky ? m_front->block_size() : 0; }
   void set_executor(Executor* executor) override { m_executor = executor; }
+  void set_fast_dofs(std::vector<int> dofs) override { m_fast_now = std::move(dofs); }
 
  private:
   // The first factorize() of a pattern after a cut, with an inherited factor: the bridge preconditions the solves
@@ -735,6 +765,7 @@ class PcgSolver final : public LinearSolver {
     if (m_have_factor) {  // the solves use it from now on, also when they were bridged
       m_bridging = false;
       m_bridge.reset();
+      m_fast_front = m_fast_now;
     }
     fresh_factor();
     return m_have_factor;
@@ -753,6 +784,7 @@ class PcgSolver final : public LinearSolver {
     m_pending->factor = m_back ? std::move(m_back) : std::make_unique<CholmodFactor>();
     m_pending->factor->keep_single(m_single);
     m_pending->factor->thorough_ordering(m_opt.thorough_ordering);
+    m_pending->fast = m_fast_now;
     CholmodFactor* factor = m_pending->factor.get();
     const SpMat* A = &m_pending->A;
     m_pending->done = std::async(std::launch::async, [factor, A] {
@@ -770,6 +802,7 @@ class PcgSolver final : public LinearSolver {
   void adopt_pending(SolveInfo& info) {
     const bool ok = m_pending->done.get();
     std::unique_ptr<CholmodFactor> factor = std::move(m_pending->factor);
+    std::vector<int> fast = std::move(m_pending->fast);
     m_pending.reset();
     if (!ok) {
       m_back = std::move(factor);
@@ -778,6 +811,7 @@ class PcgSolver final : public LinearSolver {
     }
     m_back = std::move(m_front);
     m_front = std::move(factor);
+    m_fast_front = std::move(fast);
     m_have_factor = true;
     m_bridging = false;
     m_bridge.reset();
@@ -814,12 +848,34 @@ class PcgSolver final : public LinearSolver {
     return !m_front->analyzed() && m_bridge ? m_bridge->old_factor() : *m_front;
   }
   void precondition(const VecX& r, VecX& z) {
+    if (!m_use_cholesky)
+      z = m_inv_diag.cwiseProduct(r);
+    else if (!m_fast.empty())
+      m_fast.apply(*m_A, r, z, [&](const VecX& rr, VecX& w) { apply_factor(rr, w); });
+    else
+      apply_factor(r, z);
+  }
+  // z = the front factor's solve applied to r, or the bridge's while bridging (z = r when CHOLMOD fails, out of
+  // memory: an unpreconditioned step).
+  void apply_factor(const VecX& r, VecX& z) {
     if (m_bridging)
       m_bridge->apply(*m_A, r, z, m_single);
-    else if (!m_use_cholesky)
-      z = m_inv_diag.cwiseProduct(r);
     else if (!(m_single ? m_front->solve_single(r, z) : m_front->solve(r, z)))
-      z = r;  // CHOLMOD failed (out of memory): an unpreconditioned step
+      z = r;
+  }
+  // The fast region for the solve about to run (see set_fast_dofs): the fast DOFs of this solve's matrix and of the
+  // front factor's (the two matrices differ there by more than the factor's age), solved exactly around the factor
+  // (LocalSolve). While bridging, around the bridge, with this matrix's fast DOFs alone (the old factor's are in the
+  // old revision's numbering, and the bridge's region covers the cut). When its factorisation fails, the factor
+  // alone.
+  void prepare_fast_region() {
+    std::vector<int> region;
+    if (m_use_cholesky && m_bridging)
+      region = m_fast_now;
+    else if (m_use_cholesky && m_have_factor)
+      std::set_union(m_fast_now.begin(), m_fast_now.end(), m_fast_front.begin(), m_fast_front.end(),
+                     std::back_inserter(region));
+    m_fast.build(*m_A, std::move(region));  // on failure the region is empty: PCG checks A's definiteness itself
   }
   void run_pcg(const VecX& b, VecX& x, SolveInfo& info, int max_iterations) {
     const SpMat& A = *m_A;
@@ -874,6 +930,9 @@ class PcgSolver final : public LinearSolver {
   VecX m_inv_diag;
   const SpMat* m_A = nullptr;
   Executor* m_executor = nullptr;  ///< runs the products with A (null: the calling thread)
+  std::vector<int> m_fast_now;     ///< the fast DOFs of the current matrix (set_fast_dofs)
+  std::vector<int> m_fast_front;   ///< those of the matrix the front factor was computed from
+  LocalSolve m_fast;               ///< the exact solve on the fast region of the current solve
 };
 
 }  // namespace

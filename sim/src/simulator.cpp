@@ -215,8 +215,9 @@ bool Simulator::solve_increment(double dt, const VecX& dv_c, VecX& dv) {
     if (m_constrained[std::size_t(d)]) rhs.segment<3>(3 * d) = dv_c.segment<3>(3 * d);
   m_profile.contact = lap(t0);
 
-  // Solve, warm-started from the last increment.
+  // Solve, warm-started from the last increments; the contacts' DOFs change fast (set_fast_dofs).
   analyze_if_needed();
+  m_solver->set_fast_dofs(contact_dofs());
   if (!m_solver->factorize(m_A)) {
     ++m_stats.solver_failures;
     return false;
@@ -263,6 +264,16 @@ bool Simulator::commit_step(double dt, const VecX& dv, const std::vector<Vec3>& 
   std::swap(m_dv_prev2, m_dv_prev);
   m_dv_prev = dv;
   return true;
+}
+
+std::vector<int> Simulator::contact_dofs() const {
+  std::vector<int> out;
+  for (const Contact& c : m_contacts)
+    for (const ContactDof& d : c.dofs)
+      if (!m_constrained[std::size_t(d.dof)]) out.push_back(d.dof);
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
 }
 
 void Simulator::warm_start(double dt, VecX& dv) const {

@@ -3,6 +3,7 @@
 // solve per right-hand side.
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "octocut/sim/types.hpp"
 
@@ -43,6 +44,11 @@ class LinearSolver {
   /// The executor whose threads the solver may use for its products with A (pcg), or null for the calling thread
   /// alone. The executor must outlive the solver or be replaced first.
   virtual void set_executor(Executor* executor) {}
+  /// The DOFs (ascending) whose rows of A change fast from one solve to the next, such as those of the contact
+  /// samples: pcg with the lagged Cholesky factor then solves them, and those of the matrix its factor was computed
+  /// from, exactly at every solve (see make_linear_solver). Call before factorize(); empty (the default) turns it
+  /// off.
+  virtual void set_fast_dofs(std::vector<int> dofs) {}
 };
 
 struct LinearSolverOptions {

@@ -159,6 +159,8 @@ class Simulator {
   bool solve_increment(double dt, const VecX& dv_c, VecX& dv);
   // Checks the state that dv gives and commits it, advancing t by dt.
   bool commit_step(double dt, const VecX& dv, const std::vector<Vec3>& target);
+  /// The free DOFs the current contacts' rows reach, ascending.
+  [[nodiscard]] std::vector<int> contact_dofs() const;
   /// dv = the start of the solve of a step of dt (m/s, 3 num_dofs), from the last steps' increments.
   void warm_start(double dt, VecX& dv) const;
   // The defined reset after a step failed at the smallest dt, from the step's start state.

@@ -7,12 +7,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <limits>
 
 #include "octocut/engine/io/mesh_io.hpp"
 #include "octocut/engine/run/scene_object.hpp"
 #include "octocut/engine/run/tool.hpp"
 #include "octocut/engine/scene/scene_loader.hpp"
+#include "octocut/sim/parallel.hpp"
 #include "octocut/sim/timing.hpp"
 
 namespace octocut::engine {
@@ -175,9 +177,9 @@ struct ContactWorld::Impl {
   void set_mesh(Collider& c, const sim::TriMesh& mesh);
   void add(Collider c, double mass, const sim::Pose& pose);
   [[nodiscard]] sim::Pose pose_at(const Collider& c, double t, const std::vector<sim::Pose>& tools) const;
-  void query(std::size_t ci, const sim::ContactSamples& samples, const std::vector<Vec3>& x,
-             const std::vector<Vec3>& v, double t, double dt, const std::vector<sim::Pose>& now,
-             const std::vector<sim::Pose>& next, std::vector<sim::Contact>& out);
+  void query(std::size_t ci, const sim::ContactSamples& samples, const std::vector<Vec3>& x, double t, double dt,
+             const std::vector<sim::Pose>& now, const std::vector<sim::Pose>& next, sim::Executor* executor,
+             std::vector<sim::Contact>& out);
 };
 
 void ContactWorld::Impl::set_mesh(Collider& c, const sim::TriMesh& mesh) {
@@ -297,8 +299,9 @@ ContactWorld::ContactWorld(const Scene& scene, const std::vector<sim::TriMesh>& 
 ContactWorld::~ContactWorld() = default;
 
 void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& samples, const std::vector<Vec3>& x,
-                               const std::vector<Vec3>& v, double t, double dt, const std::vector<sim::Pose>& now,
-                               const std::vector<sim::Pose>& next, std::vector<sim::Contact>& out) {
+                               double t, double dt, const std::vector<sim::Pose>& now,
+                               const std::vector<sim::Pose>& next, sim::Executor* executor,
+                               std::vector<sim::Contact>& out) {
   Collider& c = colliders[ci];
   const sim::Pose pose = pose_at(c, t, now);
   const sim::Pose pose_next = c.kinematic ? pose_at(c, t + dt, next) : pose;
@@ -312,42 +315,68 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
     c.last_depth.assign(std::size_t(n), 0.0);
   }
   const btVector3 com = c.dynamic ? c.body->getCenterOfMassPosition() : btVector3(0, 0, 0);
-  for (int i = 0; i < n; ++i) {
-    const Vec3 p = samples.position(i, x);
-    // Bullet's bounding box of the shape, then the clearance known from the last query in the collider's frame.
-    if (p.x() < lo.x() || p.y() < lo.y() || p.z() < lo.z() || p.x() > hi.x() || p.y() > hi.y() || p.z() > hi.z())
-      continue;
-    const Vec3 local = pose.rotation.transpose() * (p - pose.position);
-    double& clearance = c.cache_clearance[std::size_t(i)];
-    if (clearance > 0.0 && (local - c.cache_local[std::size_t(i)]).norm() < clearance) continue;
-    Vec3 normal = Vec3::UnitZ();
-    // A sample already inside a triangle mesh is followed with a deeper search, so that a tool pressing on keeps it.
-    double& last = c.last_depth[std::size_t(i)];
-    const double d = signed_distance(c, tr, p, std::max(depth, 2.0 * last), normal, clearance);
-    c.cache_local[std::size_t(i)] = local;
-    last = d < 0.0 ? -d : 0.0;
-    if (!(d < 0.0)) continue;
-    sim::Contact k;
-    k.dofs.assign(samples.dofs.begin() + samples.begin[std::size_t(i)],
-                  samples.dofs.begin() + samples.begin[std::size_t(i) + 1]);
-    k.normal = normal;
-    k.penetration = -d;
-    k.stiffness = stiffness * samples.area[std::size_t(i)];
-    k.damping = scene.contact.damping * k.stiffness;
-    k.friction = c.friction;
-    if (c.dynamic) k.rigid_velocity = from_bt(c.body->getVelocityInLocalPoint(bt(p) - com));
-    else if (c.kinematic && dt > 0.0) k.rigid_velocity = (pose_next.apply(local) - p) / dt;
-    (void)v;
-    c.state.max_penetration = std::max(c.state.max_penetration, -d);
-    out.push_back(std::move(k));
-    refs.push_back({ci, p});
+  // The samples in chunks, in parallel when an executor is given: each sample reads and writes only its own cache
+  // entries, and Bullet's queries on a shape are read-only. The chunks' contacts are joined in sample order, so the
+  // result does not depend on the threads.
+  constexpr int kChunk = 256;
+  const int chunks = (n + kChunk - 1) / kChunk;
+  struct Found {
+    std::vector<sim::Contact> contacts;
+    std::vector<ContactRef> refs;
+    double max_penetration = 0.0;
+  };
+  std::vector<Found> found(static_cast<std::size_t>(chunks));
+  const auto run = [&](int cb, int ce) {
+    for (int chunk = cb; chunk < ce; ++chunk) {
+      Found& f = found[std::size_t(chunk)];
+      for (int i = chunk * kChunk; i < std::min(n, (chunk + 1) * kChunk); ++i) {
+        const Vec3 p = samples.position(i, x);
+        // Bullet's bounding box of the shape, then the clearance known from the last query in the collider's frame.
+        if (p.x() < lo.x() || p.y() < lo.y() || p.z() < lo.z() || p.x() > hi.x() || p.y() > hi.y() ||
+            p.z() > hi.z())
+          continue;
+        const Vec3 local = pose.rotation.transpose() * (p - pose.position);
+        double& clearance = c.cache_clearance[std::size_t(i)];
+        if (clearance > 0.0 && (local - c.cache_local[std::size_t(i)]).norm() < clearance) continue;
+        Vec3 normal = Vec3::UnitZ();
+        // A sample already inside a triangle mesh is followed with a deeper search, so that a tool pressing on keeps
+        // it.
+        double& last = c.last_depth[std::size_t(i)];
+        const double d = signed_distance(c, tr, p, std::max(depth, 2.0 * last), normal, clearance);
+        c.cache_local[std::size_t(i)] = local;
+        last = d < 0.0 ? -d : 0.0;
+        if (!(d < 0.0)) continue;
+        sim::Contact k;
+        k.dofs.assign(samples.dofs.begin() + samples.begin[std::size_t(i)],
+                      samples.dofs.begin() + samples.begin[std::size_t(i) + 1]);
+        k.normal = normal;
+        k.penetration = -d;
+        k.stiffness = stiffness * samples.area[std::size_t(i)];
+        k.damping = scene.contact.damping * k.stiffness;
+        k.friction = c.friction;
+        if (c.dynamic) k.rigid_velocity = from_bt(c.body->getVelocityInLocalPoint(bt(p) - com));
+        else if (c.kinematic && dt > 0.0) k.rigid_velocity = (pose_next.apply(local) - p) / dt;
+        f.max_penetration = std::max(f.max_penetration, -d);
+        f.contacts.push_back(std::move(k));
+        f.refs.push_back({ci, p});
+      }
+    }
+  };
+  if (executor != nullptr && executor->threads() > 1 && chunks > 1)
+    executor->parallel_for(chunks, 1, run);
+  else
+    run(0, chunks);
+  for (Found& f : found) {
+    c.state.max_penetration = std::max(c.state.max_penetration, f.max_penetration);
+    std::move(f.contacts.begin(), f.contacts.end(), std::back_inserter(out));
+    refs.insert(refs.end(), f.refs.begin(), f.refs.end());
   }
 }
 
 std::vector<sim::Contact> ContactWorld::find(const sim::ContactSamples& samples, const std::vector<Vec3>& x,
                                              const std::vector<Vec3>& v, double t, double dt,
                                              const std::vector<sim::Pose>& tool_now,
-                                             const std::vector<sim::Pose>& tool_next) {
+                                             const std::vector<sim::Pose>& tool_next, sim::Executor* executor) {
   const auto t0 = sim::Clock::now();
   if (std::size_t(samples.size()) != m->samples) reset_samples();
   m->samples = std::size_t(samples.size());
@@ -355,7 +384,7 @@ std::vector<sim::Contact> ContactWorld::find(const sim::ContactSamples& samples,
   m->refs.clear();
   for (std::size_t ci = 0; ci < m->colliders.size(); ++ci) {
     m->colliders[ci].state.max_penetration = 0.0;
-    m->query(ci, samples, x, v, t, dt, tool_now, tool_next, out);
+    m->query(ci, samples, x, t, dt, tool_now, tool_next, executor, out);
     m->max_penetration = std::max(m->max_penetration, m->colliders[ci].state.max_penetration);
   }
   m->profile.queries = sim::ms_since(t0);

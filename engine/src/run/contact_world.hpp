@@ -11,6 +11,7 @@
 
 #include "octocut/engine/scene/scene.hpp"
 #include "octocut/sim/contact.hpp"
+#include "octocut/sim/parallel.hpp"
 #include "octocut/sim/pose.hpp"
 #include "octocut/sim/surface.hpp"
 
@@ -56,10 +57,12 @@ class ContactWorld {
 
   /// The contacts of the coming step [t, t + dt] for samples at DOF positions x and velocities v (num_dofs), with
   /// the tools at `tool_now` (t) and `tool_next` (t + dt) (poses per scene tool). Keeps which collider each contact
-  /// is with.
+  /// is with. The samples are queried on the executor's threads when one is given (the same contacts, in the same
+  /// order, whatever the threads).
   std::vector<sim::Contact> find(const sim::ContactSamples& samples, const std::vector<sim::Vec3>& x,
                                  const std::vector<sim::Vec3>& v, double t, double dt,
-                                 const std::vector<sim::Pose>& tool_now, const std::vector<sim::Pose>& tool_next);
+                                 const std::vector<sim::Pose>& tool_now, const std::vector<sim::Pose>& tool_next,
+                                 sim::Executor* executor = nullptr);
   /// After the step: each collider's force (the opposite of its contacts' forces on the tissue), applied to the
   /// dynamic bodies (two-way coupling), and Bullet stepped to t + dt with the
   /// kinematic bodies and tools at their poses there.

@@ -197,6 +197,32 @@ TEST_F(ContactTest, CuttingWhileABodyPressesStaysFiniteAndTheCutFacesCollide) {
   EXPECT_EQ(r.failed_steps, 0);
 }
 
+// The contact queries run on the simulator's threads in chunks of samples: with one thread and with two, the same
+// scene (a plate pressing, a punch cutting, a rod in the hole) gives the same contact forces every step and the same
+// final state, bit for bit.
+TEST_F(ContactTest, ContactsAreTheSameOnOneAndTwoThreads) {
+  std::vector<std::vector<double>> forces[2];
+  std::vector<Vec3> final_x[2];
+  long samples = 0;
+  for (const int threads : {1, 2}) {
+    World world(scene(kCutPressed, {"/solver/threads=" + std::to_string(threads)}), WorldOptions{.render = false});
+    while (!world.done()) {
+      world.step();
+      const Report r = world.report();
+      std::vector<double> f;
+      for (const auto& b : r.contact.bodies) f.insert(f.end(), b.force_n.begin(), b.force_n.end());
+      forces[threads - 1].push_back(f);
+      samples = r.contact.samples;
+    }
+    final_x[threads - 1] = world.simulator().state().x;
+  }
+  EXPECT_GT(samples, 512);  // several chunks of samples
+  ASSERT_EQ(forces[0].size(), forces[1].size());
+  for (std::size_t k = 0; k < forces[0].size(); ++k) ASSERT_EQ(forces[0][k], forces[1][k]) << "step " << k;
+  ASSERT_EQ(final_x[0].size(), final_x[1].size());
+  for (std::size_t d = 0; d < final_x[0].size(); ++d) ASSERT_EQ(final_x[0][d], final_x[1][d]) << "DOF " << d;
+}
+
 TEST_F(ContactTest, RigidBodiesAreDrawnAtTheirPose) {
   // The block on its floor, rendered (the description only; no GL): the floor is drawn, a box at (0, 0, -0.01).
   World world(scene(kBlock, {"/render/enabled=true", "/duration=0.004"}), WorldOptions{.render = true});

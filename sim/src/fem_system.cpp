@@ -418,7 +418,6 @@ void FemSystem::assemble_system(double mc, double kc, const ElementFrame& frame,
                                 const std::vector<char>& constrained, const VecX& u, SpMat& A, VecX& coupling) {
   Impl& im = *m_impl;
   const ObjectModel& m = im.model();
-  const int ne = m.num_elements();
   const int nd = m.num_dofs();
   if (!im.have_pattern || im.pattern_constrained != constrained) {
     im.build_pattern(constrained);

@@ -98,6 +98,15 @@ namespace {
 // polar factor, which is then the rotation that the SVD below gives (U V^T has det +1, no sign correction). Returns
 // false, leaving R unset, when F is inverted or nearly singular (det F <= 1e-3 |F|_F^3; the identity has 0.19) or
 // when 24 iterations do not converge: the SVD decides those.
+// The cofactor matrix of X: X^-T det X.
+Mat3 cofactor(const Mat3& X) {
+  Mat3 c;
+  c.col(0) = X.col(1).cross(X.col(2));
+  c.col(1) = X.col(2).cross(X.col(0));
+  c.col(2) = X.col(0).cross(X.col(1));
+  return c;
+}
+
 bool newton_polar_rotation(const Mat3& F, Mat3& R) {
   const double fn = F.norm();
   const double det = F.determinant();
@@ -106,21 +115,13 @@ bool newton_polar_rotation(const Mat3& F, Mat3& R) {
   double d = det;
   bool scale = true;
   for (int it = 0; it < 24; ++it) {
-    // X^-T = cofactor(X) / det X.
-    Mat3 cof;
-    cof.col(0) = X.col(1).cross(X.col(2));
-    cof.col(1) = X.col(2).cross(X.col(0));
-    cof.col(2) = X.col(0).cross(X.col(1));
     const double g = scale ? 1.0 / std::cbrt(d) : 1.0;
-    const Mat3 Y = 0.5 * (g * X + cof / (g * d));
+    const Mat3 Y = 0.5 * (g * X + cofactor(X) / (g * d));  // X^-T = cofactor(X) / det X
     const double delta = (Y - X).norm();
     X = Y;
     if (delta < 1e-9) {
       // Quadratic convergence: one more step brings the error below round-off.
-      cof.col(0) = X.col(1).cross(X.col(2));
-      cof.col(1) = X.col(2).cross(X.col(0));
-      cof.col(2) = X.col(0).cross(X.col(1));
-      R = 0.5 * (X + cof / X.determinant());
+      R = 0.5 * (X + cofactor(X) / X.determinant());
       return true;
     }
     scale = delta > 1e-2;

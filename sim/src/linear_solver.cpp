@@ -466,7 +466,6 @@ class LocalSolve {
     return false;
   }
   [[nodiscard]] bool empty() const { return m_dofs.empty(); }
-  [[nodiscard]] const std::vector<int>& dofs() const { return m_dofs; }
   /// z = the combination applied to r (see the class comment); global(r, w) sets w = G r.
   template <class Global>
   void apply(const SpMat& A, const VecX& r, VecX& z, Global&& global) {

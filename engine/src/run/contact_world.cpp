@@ -1,7 +1,6 @@
 // The rigid side of contact: a Bullet world (issue 16). See contact_world.hpp. Bullet's types stay in this file.
 #include "run/contact_world.hpp"
 
-#include <BulletCollision/CollisionShapes/btTriangleShape.h>
 #include <BulletCollision/NarrowPhaseCollision/btGjkEpa2.h>
 #include <BulletCollision/NarrowPhaseCollision/btVoronoiSimplexSolver.h>
 #include <btBulletDynamicsCommon.h>
@@ -376,7 +375,7 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
 }
 
 std::vector<sim::Contact> ContactWorld::find(const sim::ContactSamples& samples, const std::vector<Vec3>& x,
-                                             const std::vector<Vec3>& v, double t, double dt,
+                                             double t, double dt,
                                              const std::vector<sim::Pose>& tool_now,
                                              const std::vector<sim::Pose>& tool_next, sim::Executor* executor) {
   const auto t0 = sim::Clock::now();

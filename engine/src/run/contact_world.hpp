@@ -55,12 +55,11 @@ class ContactWorld {
   ContactWorld(const ContactWorld&) = delete;
   ContactWorld& operator=(const ContactWorld&) = delete;
 
-  /// The contacts of the coming step [t, t + dt] for samples at DOF positions x and velocities v (num_dofs), with
+  /// The contacts of the coming step [t, t + dt] for samples at DOF positions x (num_dofs), with
   /// the tools at `tool_now` (t) and `tool_next` (t + dt) (poses per scene tool). Keeps which collider each contact
   /// is with. The samples are queried on the executor's threads when one is given (the same contacts, in the same
   /// order, whatever the threads).
-  std::vector<sim::Contact> find(const sim::ContactSamples& samples, const std::vector<sim::Vec3>& x,
-                                 const std::vector<sim::Vec3>& v, double t, double dt,
+  std::vector<sim::Contact> find(const sim::ContactSamples& samples, const std::vector<sim::Vec3>& x, double t, double dt,
                                  const std::vector<sim::Pose>& tool_now, const std::vector<sim::Pose>& tool_next,
                                  sim::Executor* executor = nullptr);
   /// After the step: each collider's force (the opposite of its contacts' forces on the tissue), applied to the

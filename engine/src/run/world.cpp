@@ -268,8 +268,7 @@ void World::Impl::contact_before_step() {
     now.push_back(tool_pose(i, t));
     next.push_back(tool_pose(i, t + dt));
   }
-  std::vector<sim::Contact> found = contact->find(samples, sim->state().x, sim->state().v, t, dt, now, next,
-                                                    &sim->executor());
+  std::vector<sim::Contact> found = contact->find(samples, sim->state().x, t, dt, now, next, &sim->executor());
   if (rendering && scene.render.overlays.contacts) drawn_contacts = found;
   else drawn_contacts.clear();
   sim->set_contacts(std::move(found));

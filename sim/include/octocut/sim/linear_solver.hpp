@@ -46,8 +46,8 @@ class LinearSolver {
   virtual void set_executor(Executor* executor) {}
   /// The DOFs (ascending) whose rows of A change fast from one solve to the next, such as those of the contact
   /// samples: pcg with the lagged Cholesky factor then solves them, and those of the matrix its factor was computed
-  /// from, exactly at every solve (see make_linear_solver). Call before factorize(); empty (the default) turns it
-  /// off.
+  /// from, exactly at every solve, combined with the factor as symmetric multiplicative Schwarz (docs/architecture.md,
+  /// "Linear solvers"); the others ignore it. Call before factorize(); empty (the default) turns it off.
   virtual void set_fast_dofs(std::vector<int> dofs) {}
 };
 

@@ -389,6 +389,7 @@ struct BackgroundFactorization {
   int solves = 0;                         ///< solves begun since it started
   double iteration_flops = 0.0;           ///< PCG operations of those solves
   std::vector<int> fast;                  ///< the fast DOFs of A (set_fast_dofs)
+  std::vector<Mat3> rotations;            ///< the DOFs' rotations at A (set_dof_rotations)
 };
 
 // Background factorisations whose solver no longer wants them (replaced after a cut, or refreshed at once) are kept
@@ -734,6 +735,7 @@ class PcgSolver final : public LinearSolver {
   int ordering_block_size() const override { return m_use_cholesky ? m_front->block_size() : 0; }
   void set_executor(Executor* executor) override { m_executor = executor; }
   void set_fast_dofs(std::vector<int> dofs) override { m_fast_now = std::move(dofs); }
+  void set_dof_rotations(std::vector<Mat3> rotations) override { m_rotations_now = std::move(rotations); }
 
  private:
   // The first factorize() of a pattern after a cut, with an inherited factor: the bridge preconditions the solves
@@ -765,6 +767,7 @@ class PcgSolver final : public LinearSolver {
       m_bridging = false;
       m_bridge.reset();
       m_fast_front = m_fast_now;
+      m_rotations_front = m_rotations_now;
     }
     fresh_factor();
     return m_have_factor;
@@ -784,6 +787,7 @@ class PcgSolver final : public LinearSolver {
     m_pending->factor->keep_single(m_single);
     m_pending->factor->thorough_ordering(m_opt.thorough_ordering);
     m_pending->fast = m_fast_now;
+    m_pending->rotations = m_rotations_now;
     CholmodFactor* factor = m_pending->factor.get();
     const SpMat* A = &m_pending->A;
     m_pending->done = std::async(std::launch::async, [factor, A] {
@@ -802,6 +806,7 @@ class PcgSolver final : public LinearSolver {
     const bool ok = m_pending->done.get();
     std::unique_ptr<CholmodFactor> factor = std::move(m_pending->factor);
     std::vector<int> fast = std::move(m_pending->fast);
+    std::vector<Mat3> rotations = std::move(m_pending->rotations);
     m_pending.reset();
     if (!ok) {
       m_back = std::move(factor);
@@ -811,6 +816,7 @@ class PcgSolver final : public LinearSolver {
     m_back = std::move(m_front);
     m_front = std::move(factor);
     m_fast_front = std::move(fast);
+    m_rotations_front = std::move(rotations);
     m_have_factor = true;
     m_bridging = false;
     m_bridge.reset();
@@ -857,10 +863,36 @@ class PcgSolver final : public LinearSolver {
   // z = the front factor's solve applied to r, or the bridge's while bridging (z = r when CHOLMOD fails, out of
   // memory: an unpreconditioned step).
   void apply_factor(const VecX& r, VecX& z) {
-    if (m_bridging)
+    if (m_bridging) {
       m_bridge->apply(*m_A, r, z, m_single);
-    else if (!(m_single ? m_front->solve_single(r, z) : m_front->solve(r, z)))
+      return;
+    }
+    const bool warped = !m_warp.empty();
+    if (warped) {  // z = Q F^-1 Q^T r (see set_dof_rotations)
+      m_warped.resize(r.size());
+      for (std::size_t d = 0; d < m_warp.size(); ++d)
+        m_warped.segment<3>(3 * Eigen::Index(d)).noalias() = m_warp[d].transpose() * r.segment<3>(3 * Eigen::Index(d));
+    }
+    const VecX& rhs = warped ? m_warped : r;
+    if (!(m_single ? m_front->solve_single(rhs, z) : m_front->solve(rhs, z))) {
       z = r;
+      return;
+    }
+    if (warped)
+      for (std::size_t d = 0; d < m_warp.size(); ++d) {
+        const Vec3 zd = z.segment<3>(3 * Eigen::Index(d));
+        z.segment<3>(3 * Eigen::Index(d)).noalias() = m_warp[d] * zd;
+      }
+  }
+  // The warp of the front factor for the solve about to run: Q_d = R_d R_d,factor^T for every DOF, or none (while
+  // bridging, or without rotations for both matrices).
+  void prepare_warp() {
+    m_warp.clear();
+    if (!m_use_cholesky || m_bridging || !m_have_factor || m_rotations_now.empty() ||
+        m_rotations_now.size() != m_rotations_front.size() || 3 * Eigen::Index(m_rotations_now.size()) != m_A->rows())
+      return;
+    m_warp.resize(m_rotations_now.size());
+    for (std::size_t d = 0; d < m_warp.size(); ++d) m_warp[d] = m_rotations_now[d] * m_rotations_front[d].transpose();
   }
   // The fast region for the solve about to run (see set_fast_dofs): the fast DOFs of this solve's matrix and of the
   // front factor's (the two matrices differ there by more than the factor's age), solved exactly around the factor
@@ -868,6 +900,7 @@ class PcgSolver final : public LinearSolver {
   // old revision's numbering, and the bridge's region covers the cut). When its factorisation fails, the factor
   // alone.
   void prepare_fast_region() {
+    prepare_warp();
     std::vector<int> region;
     if (m_use_cholesky && m_bridging)
       region = m_fast_now;
@@ -931,6 +964,10 @@ class PcgSolver final : public LinearSolver {
   Executor* m_executor = nullptr;  ///< runs the products with A (null: the calling thread)
   std::vector<int> m_fast_now;     ///< the fast DOFs of the current matrix (set_fast_dofs)
   std::vector<int> m_fast_front;   ///< those of the matrix the front factor was computed from
+  std::vector<Mat3> m_rotations_now;    ///< the DOFs' rotations at the current matrix (set_dof_rotations)
+  std::vector<Mat3> m_rotations_front;  ///< those at the matrix the front factor was computed from
+  std::vector<Mat3> m_warp;             ///< Q of the current solve (prepare_warp; empty: no warp)
+  VecX m_warped;                        ///< work: Q^T r
   LocalSolve m_fast;               ///< the exact solve on the fast region of the current solve
 };
 

@@ -218,6 +218,7 @@ bool Simulator::solve_increment(double dt, const VecX& dv_c, VecX& dv) {
   // Solve, warm-started from the last increments; the contacts' DOFs change fast (set_fast_dofs).
   analyze_if_needed();
   m_solver->set_fast_dofs(contact_dofs());
+  m_solver->set_dof_rotations(m_fem->dof_rotations(frame));
   if (!m_solver->factorize(m_A)) {
     ++m_stats.solver_failures;
     return false;

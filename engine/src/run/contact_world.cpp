@@ -178,8 +178,8 @@ struct ContactWorld::Impl {
   void set_mesh(Collider& c, const sim::TriMesh& mesh);
   void add(Collider c, double mass, const sim::Pose& pose);
   [[nodiscard]] sim::Pose pose_at(const Collider& c, double t, const std::vector<sim::Pose>& tools) const;
-  void query(std::size_t ci, const sim::ContactSamples& samples, const std::vector<Vec3>& x, double t, double dt,
-             const std::vector<sim::Pose>& now, const std::vector<sim::Pose>& next, sim::Executor* executor,
+  void query(std::size_t ci, const sim::ContactSamples& samples, const std::vector<Vec3>& positions, double t,
+             double dt, const std::vector<sim::Pose>& now, const std::vector<sim::Pose>& next, sim::Executor* executor,
              std::vector<sim::Contact>& out);
 };
 
@@ -299,8 +299,8 @@ ContactWorld::ContactWorld(const Scene& scene, const std::vector<sim::TriMesh>& 
 
 ContactWorld::~ContactWorld() = default;
 
-void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& samples, const std::vector<Vec3>& x,
-                               double t, double dt, const std::vector<sim::Pose>& now,
+void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& samples,
+                               const std::vector<Vec3>& positions, double t, double dt, const std::vector<sim::Pose>& now,
                                const std::vector<sim::Pose>& next, sim::Executor* executor,
                                std::vector<sim::Contact>& out) {
   Collider& c = colliders[ci];
@@ -331,7 +331,7 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
     for (int chunk = cb; chunk < ce; ++chunk) {
       Found& f = found[std::size_t(chunk)];
       for (int i = chunk * kChunk; i < std::min(n, (chunk + 1) * kChunk); ++i) {
-        const Vec3 p = samples.position(i, x);
+        const Vec3& p = positions[std::size_t(i)];
         // Bullet's bounding box of the shape, then the clearance known from the last query in the collider's frame.
         if (p.x() < lo.x() || p.y() < lo.y() || p.z() < lo.z() || p.x() > hi.x() || p.y() > hi.y() ||
             p.z() > hi.z())
@@ -381,11 +381,21 @@ std::vector<sim::Contact> ContactWorld::find(const sim::ContactSamples& samples,
   const auto t0 = sim::Clock::now();
   if (std::size_t(samples.size()) != m->samples) reset_samples();
   m->samples = std::size_t(samples.size());
+  // The samples' positions once for all colliders (on the executor's threads: each writes its own entries).
+  const int n = samples.size();
+  std::vector<Vec3> positions(std::size_t(n), Vec3::Zero());
+  const auto place = [&](int b, int e) {
+    for (int i = b; i < e; ++i) positions[std::size_t(i)] = samples.position(i, x);
+  };
+  if (executor != nullptr && executor->threads() > 1 && n > 1024)
+    executor->parallel_for(n, 1024, place);
+  else
+    place(0, n);
   std::vector<sim::Contact> out;
   m->refs.clear();
   for (std::size_t ci = 0; ci < m->colliders.size(); ++ci) {
     m->colliders[ci].state.max_penetration = 0.0;
-    m->query(ci, samples, x, t, dt, tool_now, tool_next, executor, out);
+    m->query(ci, samples, positions, t, dt, tool_now, tool_next, executor, out);
     m->max_penetration = std::max(m->max_penetration, m->colliders[ci].state.max_penetration);
   }
   m->profile.queries = sim::ms_since(t0);

@@ -28,6 +28,9 @@ class FemSystem {
   void prolong(const std::vector<Vec3>& dofs, std::vector<Vec3>& slots) const;
   /// Element rotations at the configuration x (num_dofs).
   void rotations(const std::vector<Vec3>& x, ElementFrame& frame) const;
+  /// Each DOF's rotation at `frame` (num_dofs): its elements' rotations summed with the weights of P (|w|: a hanging
+  /// corner's share) and orthonormalised. What the lagged factor is warped by (LinearSolver::set_dof_rotations).
+  [[nodiscard]] std::vector<Mat3> dof_rotations(const ElementFrame& frame) const;
   /// Elastic restoring force P^T f_e (3 num_dofs), N, with rotations taken from `frame`.
   void elastic_force(const std::vector<Vec3>& x, const ElementFrame& frame, VecX& f) const;
   /// Elastic energy 1/2 sum (R^T x - X)^T K (R^T x - X), J.

@@ -49,6 +49,12 @@ class LinearSolver {
   /// from, exactly at every solve, combined with the factor as symmetric multiplicative Schwarz (docs/architecture.md,
   /// "Linear solvers"); the others ignore it. Call before factorize(); empty (the default) turns it off.
   virtual void set_fast_dofs(std::vector<int> dofs) {}
+  /// The rotation of each DOF's neighbourhood in the current configuration (num_dofs; the corotational frames of
+  /// the elements around it, averaged): pcg warps its lagged factor by how far each DOF has turned since the factor's
+  /// matrix, Q F^-1 Q^T with Q_d = R_d R_d,factor^T, so that a factor stays as good under rotation as the rotated
+  /// matrix Q A_factor Q^T is close to A (docs/architecture.md, "Linear solvers"); the others ignore it. Call before
+  /// factorize(); empty (the default) turns it off.
+  virtual void set_dof_rotations(std::vector<Mat3> rotations) {}
 };
 
 struct LinearSolverOptions {

@@ -885,14 +885,25 @@ class PcgSolver final : public LinearSolver {
       }
   }
   // The warp of the front factor for the solve about to run: Q_d = R_d R_d,factor^T for every DOF, or none (while
-  // bridging, or without rotations for both matrices).
+  // bridging, without rotations for both matrices, or while no DOF has turned by kWarpAngle since the factor's
+  // matrix: then the rotations are no larger than their spread across each element, which the warp cannot follow
+  // (Q differs between the corners of an element, so the warped element matrices no longer leave translations
+  // free), and the unwarped factor does better: a clamped cube sagging under its weight, 1.36 against 2.09
+  // iterations per step at tolerance 1e-6).
   void prepare_warp() {
     m_warp.clear();
     if (!m_use_cholesky || m_bridging || !m_have_factor || m_rotations_now.empty() ||
         m_rotations_now.size() != m_rotations_front.size() || 3 * Eigen::Index(m_rotations_now.size()) != m_A->rows())
       return;
+    constexpr double kWarpAngle = 0.01;  // rad: element matrices change by about 1 % when turned so far
+    const double trace_below = 1.0 + 2.0 * std::cos(kWarpAngle);  // tr Q = 1 + 2 cos(angle of Q)
     m_warp.resize(m_rotations_now.size());
-    for (std::size_t d = 0; d < m_warp.size(); ++d) m_warp[d] = m_rotations_now[d] * m_rotations_front[d].transpose();
+    bool turned = false;
+    for (std::size_t d = 0; d < m_warp.size(); ++d) {
+      m_warp[d] = m_rotations_now[d] * m_rotations_front[d].transpose();
+      turned = turned || m_warp[d].trace() < trace_below;
+    }
+    if (!turned) m_warp.clear();
   }
   // The fast region for the solve about to run (see set_fast_dofs): the fast DOFs of this solve's matrix and of the
   // front factor's (the two matrices differ there by more than the factor's age), solved exactly around the factor

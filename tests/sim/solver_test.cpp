@@ -378,26 +378,49 @@ TEST(LinearSolver, PcgWarpsTheLaggedFactorByTheDofsRotations) {
     fem.assemble_system(1.0, 1e-2, frame, free_dofs, VecX::Zero(3 * nd), A, coupling);
     return A;
   };
+  const auto dof_rotations = [&](const std::vector<Vec3>& x) {
+    ElementFrame frame;
+    fem.rotations(x, frame);
+    return fem.dof_rotations(frame);
+  };
   const std::vector<Vec3>& rest = m.dofs().dof_rest;
   const SpMat A0 = system(rest);
-  const auto about_z = [](double a) { return Mat3(Eigen::AngleAxisd(a, Vec3::UnitZ())); };
+  const VecX b = VecX::LinSpaced(A0.rows(), -1.0, 2.0);
+  // Factorises A0 (the DOFs' rotations identity, or none when `turn` is empty), then solves A1 with that lagged
+  // factor, the DOFs' rotations `turn`; the residual recomputed.
+  const auto solve_lagged = [&](const SpMat& A1, const std::vector<Mat3>& turn, VecX& x1) {
+    LinearSolverOptions o;
+    o.tolerance = 1e-10;
+    o.max_iterations = 1000;
+    o.factor_flop_advantage = 1e-6;     // the factor of A0 is kept
+    o.single_precision_factor = false;  // exact arithmetic up to rounding: one iteration where the warp is exact
+    auto s = make_linear_solver("pcg", o);
+    s->analyze_pattern(A0);
+    s->set_dof_rotations(turn.empty() ? std::vector<Mat3>{} : std::vector<Mat3>(std::size_t(nd), Mat3::Identity()));
+    EXPECT_TRUE(s->factorize(A0));
+    VecX x0 = VecX::Zero(A0.rows());
+    EXPECT_TRUE(s->solve(b, x0).ok);
+    s->set_dof_rotations(turn);
+    EXPECT_TRUE(s->factorize(A1));
+    x1 = VecX::Zero(A1.rows());
+    const SolveInfo info = s->solve(b, x1);
+    EXPECT_TRUE(info.ok);
+    EXPECT_FALSE(info.refactorized);
+    EXPECT_LE((b - A1 * x1).norm(), 1.01e-10 * b.norm());
+    return info.iterations;
+  };
   const Mat3 Q = Mat3(Eigen::AngleAxisd(0.6, Vec3(1, 2, 3).normalized()));
   for (const bool twist : {false, true}) {
-    std::vector<Mat3> turn(static_cast<std::size_t>(nd));
     std::vector<Vec3> x(static_cast<std::size_t>(nd));
     for (int d = 0; d < nd; ++d) {
-      turn[std::size_t(d)] = twist ? about_z(0.5 * rest[std::size_t(d)].z()) : Q;
-      x[std::size_t(d)] = turn[std::size_t(d)] * rest[std::size_t(d)];
+      const double a = 0.5 * rest[std::size_t(d)].z();
+      x[std::size_t(d)] = (twist ? Mat3(Eigen::AngleAxisd(a, Vec3::UnitZ())) : Q) * rest[std::size_t(d)];
     }
     const SpMat A1 = system(x);
-    if (twist) {  // the DOFs' rotations as the simulator gives them: from the elements' corotational frames
-      ElementFrame frame;
-      fem.rotations(x, frame);
-      turn = fem.dof_rotations(frame);
-    } else {
-      ElementFrame frame;
-      fem.rotations(x, frame);
-      for (const Mat3& r : fem.dof_rotations(frame)) ASSERT_LE((r - Q).norm(), 1e-12);
+    // The DOFs' rotations as the simulator gives them: from the elements' corotational frames.
+    const std::vector<Mat3> turn = dof_rotations(x);
+    if (!twist) {
+      for (const Mat3& r : turn) ASSERT_LE((r - Q).norm(), 1e-12);
       SpMat Qb(3 * nd, 3 * nd);
       std::vector<Eigen::Triplet<double>> t;
       for (int d = 0; d < nd; ++d)
@@ -407,34 +430,14 @@ TEST(LinearSolver, PcgWarpsTheLaggedFactorByTheDofsRotations) {
       const SpMat rotated = Qb * A0 * SpMat(Qb.transpose());
       ASSERT_LE((A1 - rotated).norm(), 1e-10 * A0.norm());
     }
-    int iterations[2] = {0, 0};
-    for (const bool warp : {false, true}) {
-      LinearSolverOptions o;
-      o.tolerance = 1e-10;
-      o.max_iterations = 1000;
-      o.factor_flop_advantage = 1e-6;     // the factor of A0 is kept
-      o.single_precision_factor = false;  // exact arithmetic up to rounding: one iteration where the warp is exact
-      auto s = make_linear_solver("pcg", o);
-      s->analyze_pattern(A0);
-      s->set_dof_rotations(warp ? std::vector<Mat3>(std::size_t(nd), Mat3::Identity()) : std::vector<Mat3>{});
-      ASSERT_TRUE(s->factorize(A0));
-      const VecX b = VecX::LinSpaced(A0.rows(), -1.0, 2.0);
-      VecX x0 = VecX::Zero(A0.rows());
-      ASSERT_TRUE(s->solve(b, x0).ok);
-      s->set_dof_rotations(warp ? turn : std::vector<Mat3>{});
-      ASSERT_TRUE(s->factorize(A1));
-      VecX x1 = VecX::Zero(A1.rows());
-      const SolveInfo info = s->solve(b, x1);
-      ASSERT_TRUE(info.ok) << (twist ? "twist" : "rigid") << (warp ? ", warped" : "");
-      EXPECT_FALSE(info.refactorized);
-      EXPECT_LE((b - A1 * x1).norm(), 1.01e-10 * b.norm());
-      iterations[warp ? 1 : 0] = info.iterations;
-    }
+    VecX x1;
+    const int plain = solve_lagged(A1, {}, x1);
+    const int warped = solve_lagged(A1, turn, x1);
     if (twist) {
-      EXPECT_LT(2 * iterations[1], iterations[0]) << "warped " << iterations[1] << ", not " << iterations[0];
+      EXPECT_LT(2 * warped, plain) << "warped " << warped << ", not " << plain;
     } else {
-      EXPECT_LE(iterations[1], 1);
-      EXPECT_GE(iterations[0], 10);
+      EXPECT_LE(warped, 1);
+      EXPECT_GE(plain, 10);
     }
   }
   // Below a turn of 0.01 rad since the factor's matrix the warp is off: the solve is the unwarped one, bit for bit.
@@ -443,20 +446,8 @@ TEST(LinearSolver, PcgWarpsTheLaggedFactorByTheDofsRotations) {
   for (int d = 0; d < nd; ++d) xs[std::size_t(d)] = small * rest[std::size_t(d)];
   const SpMat As = system(xs);
   VecX solution[2];
-  for (const bool warp : {false, true}) {
-    LinearSolverOptions o;
-    o.tolerance = 1e-10;
-    o.factor_flop_advantage = 1e-6;
-    auto s = make_linear_solver("pcg", o);
-    s->analyze_pattern(A0);
-    s->set_dof_rotations(warp ? std::vector<Mat3>(std::size_t(nd), Mat3::Identity()) : std::vector<Mat3>{});
-    ASSERT_TRUE(s->factorize(A0));
-    s->set_dof_rotations(warp ? std::vector<Mat3>(std::size_t(nd), small) : std::vector<Mat3>{});
-    ASSERT_TRUE(s->factorize(As));
-    const VecX b = VecX::LinSpaced(As.rows(), -1.0, 2.0);
-    solution[warp ? 1 : 0] = VecX::Zero(As.rows());
-    ASSERT_TRUE(s->solve(b, solution[warp ? 1 : 0]).ok);
-  }
+  solve_lagged(As, {}, solution[0]);
+  solve_lagged(As, std::vector<Mat3>(std::size_t(nd), small), solution[1]);
   EXPECT_EQ(solution[0], solution[1]);
 }
 

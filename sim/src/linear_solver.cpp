@@ -5,6 +5,8 @@
 #include <chrono>
 
 #include "octocut/sim/parallel.hpp"
+#include "supernodal_solve.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <future>
@@ -15,13 +17,6 @@
 #include <string>
 #include <vector>
 
-extern "C" {
-// Single-precision BLAS (the BLAS CHOLMOD links, OpenBLAS on Debian).
-void strsv_(const char* uplo, const char* trans, const char* diag, const int* n, const float* a, const int* lda,
-            float* x, const int* incx);
-void sgemv_(const char* trans, const int* m, const int* n, const float* alpha, const float* a, const int* lda,
-            const float* x, const int* incx, const float* beta, float* y, const int* incy);
-}
 
 namespace octocut::sim {
 
@@ -154,15 +149,17 @@ class CholmodFactor {
   /// Keeps a single-precision copy of each factor for solve_single.
   void keep_single(bool keep) { m_keep_single = keep; }
   /// x = (L L^T)^-1 b (in A's ordering) with the single-precision copy of the last factor, in double arithmetic:
-  /// the preconditioner of PCG, whose triangular solves are bound by the memory traffic of L. False without a copy.
-  bool solve_single(const VecX& b, VecX& x) {
+  /// the preconditioner of PCG, whose triangular solves are bound by the memory traffic of L. The solves run on two
+  /// of the executor's threads (SupernodalSolvePlan; the same result with one). False without a copy.
+  bool solve_single(const VecX& b, VecX& x, Executor* executor) {
     if (m_L == nullptr || m_single.size() != m_L->xsize || b.size() != Eigen::Index(m_L->n)) return false;
     const int n = int(m_L->n);
     const int* perm = static_cast<const int*>(m_L->Perm);
     m_perm.resize(std::size_t(n));
     for (int k = 0; k < n; ++k) m_perm[std::size_t(k)] = float(b[perm[k]]);
-    forward_single(m_perm.data());
-    backward_single(m_perm.data());
+    const SupernodalStructure L = structure();
+    m_plan.forward(L, m_single.data(), m_perm.data(), executor);
+    m_plan.backward(L, m_single.data(), m_perm.data(), executor);
     x.resize(n);
     for (int k = 0; k < n; ++k) x[perm[k]] = double(m_perm[std::size_t(k)]);
     return true;
@@ -201,48 +198,16 @@ class CholmodFactor {
     m_single.clear();
   }
 
-  // y = L^-1 y in place, with the single-precision copy and single-precision BLAS. Supernode s holds columns
-  // super[s] .. super[s + 1) of L as a column-major nsrow x nscol block at px[s], its rows listed at s[pi[s]] (the
-  // first nscol are its own columns).
-  void forward_single(float* y) {
-    const int* super = static_cast<const int*>(m_L->super);
-    const int* pi = static_cast<const int*>(m_L->pi);
-    const int* px = static_cast<const int*>(m_L->px);
-    const int* rows = static_cast<const int*>(m_L->s);
-    const int one = 1;
-    const float f1 = 1.0f, f0 = 0.0f;
-    for (int sn = 0; sn < int(m_L->nsuper); ++sn) {
-      int k1 = super[sn], nscol = super[sn + 1] - k1, nsrow = pi[sn + 1] - pi[sn];
-      const float* L = m_single.data() + px[sn];
-      strsv_("L", "N", "N", &nscol, L, &nsrow, y + k1, &one);
-      int nb = nsrow - nscol;  // the rows below: t = L_below y_diag, then scattered
-      if (nb == 0) continue;
-      m_t.resize(std::size_t(nb));
-      sgemv_("N", &nb, &nscol, &f1, L + nscol, &nsrow, y + k1, &one, &f0, m_t.data(), &one);
-      const int* r = rows + pi[sn] + nscol;
-      for (int i = 0; i < nb; ++i) y[r[i]] -= m_t[std::size_t(i)];
-    }
-  }
-  // y = L^-T y in place (see forward_single).
-  void backward_single(float* y) {
-    const int* super = static_cast<const int*>(m_L->super);
-    const int* pi = static_cast<const int*>(m_L->pi);
-    const int* px = static_cast<const int*>(m_L->px);
-    const int* rows = static_cast<const int*>(m_L->s);
-    const int one = 1;
-    const float f1 = 1.0f, fm1 = -1.0f;
-    for (int sn = int(m_L->nsuper) - 1; sn >= 0; --sn) {
-      int k1 = super[sn], nscol = super[sn + 1] - k1, nsrow = pi[sn + 1] - pi[sn];
-      const float* L = m_single.data() + px[sn];
-      int nb = nsrow - nscol;
-      if (nb > 0) {
-        const int* r = rows + pi[sn] + nscol;
-        m_t.resize(std::size_t(nb));
-        for (int i = 0; i < nb; ++i) m_t[std::size_t(i)] = y[r[i]];
-        sgemv_("T", &nb, &nscol, &fm1, L + nscol, &nsrow, m_t.data(), &one, &f1, y + k1, &one);
-      }
-      strsv_("L", "T", "N", &nscol, L, &nsrow, y + k1, &one);
-    }
+  // The supernodal structure of the analysed factor.
+  [[nodiscard]] SupernodalStructure structure() const {
+    SupernodalStructure L;
+    L.n = int(m_L->n);
+    L.nsuper = int(m_L->nsuper);
+    L.super = static_cast<const int*>(m_L->super);
+    L.pi = static_cast<const int*>(m_L->pi);
+    L.px = static_cast<const int*>(m_L->px);
+    L.rows = static_cast<const int*>(m_L->s);
+    return L;
   }
 
   // A square, compressed, sorted CSC matrix with int indices (n columns, nzmax entries) as a symmetric CHOLMOD
@@ -361,6 +326,7 @@ class CholmodFactor {
     }
     m_L->maxcsize = std::size_t(maxcsize);
     m_L->maxesize = std::size_t(maxesize);
+    m_plan.build(structure());
   }
 
   cholmod_common m_c{};   ///< the scalar factor's
@@ -370,7 +336,7 @@ class CholmodFactor {
   bool m_keep_single = false;
   std::vector<float> m_single;  ///< L's values in single precision (L->xsize), when kept
   std::vector<float> m_perm;    ///< solve_single's permuted right-hand side (n)
-  std::vector<float> m_t;       ///< solve_single's rows below a supernode (at most n)
+  SupernodalSolvePlan m_plan;   ///< how solve_single splits its triangular solves between two threads
   cholmod_dense* m_x = nullptr;  ///< solve2 workspaces, kept
   cholmod_dense* m_y = nullptr;
   cholmod_dense* m_e = nullptr;
@@ -552,23 +518,23 @@ class CutBridge {
     return m_local.build(A, cut_region(A));  // false without its factor: G alone would miss the cut's new DOFs
   }
   /// z = the bridge applied to r for the system matrix A (see the class comment); F_old's triangular solves in single
-  /// precision if asked.
-  void apply(const SpMat& A, const VecX& r, VecX& z, bool single) {
+  /// precision if asked, on the executor's threads.
+  void apply(const SpMat& A, const VecX& r, VecX& z, bool single, Executor* executor) {
     if (m_local.empty())
-      apply_global(r, z, single);
+      apply_global(r, z, single, executor);
     else
-      m_local.apply(A, r, z, [&](const VecX& rr, VecX& w) { apply_global(rr, w, single); });
+      m_local.apply(A, r, z, [&](const VecX& rr, VecX& w) { apply_global(rr, w, single, executor); });
   }
 
  private:
   // w = G r = T F_old^-1 T^T r.
-  void apply_global(const VecX& r, VecX& w, bool single) {
+  void apply_global(const VecX& r, VecX& w, bool single, Executor* executor) {
     const Eigen::Index n_new = m_transfer.rows(), n_old = m_transfer.cols();
     m_rc.setZero(3 * n_old);
     for (Eigen::Index j = 0; j < n_old; ++j)  // T^T r; column j of T: the new DOFs old DOF j reaches
       for (SpMat::InnerIterator it(m_transfer, j); it; ++it)
         m_rc.segment<3>(3 * j) += it.value() * r.segment<3>(3 * it.row());
-    if (!(single ? m_factor->solve_single(m_rc, m_zc) : m_factor->solve(m_rc, m_zc))) m_zc.setZero(3 * n_old);
+    if (!(single ? m_factor->solve_single(m_rc, m_zc, executor) : m_factor->solve(m_rc, m_zc))) m_zc.setZero(3 * n_old);
     w.setZero(3 * n_new);
     for (Eigen::Index j = 0; j < n_old; ++j)
       for (SpMat::InnerIterator it(m_transfer, j); it; ++it)
@@ -864,7 +830,7 @@ class PcgSolver final : public LinearSolver {
   // memory: an unpreconditioned step).
   void apply_factor(const VecX& r, VecX& z) {
     if (m_bridging) {
-      m_bridge->apply(*m_A, r, z, m_single);
+      m_bridge->apply(*m_A, r, z, m_single, m_executor);
       return;
     }
     const bool warped = !m_warp.empty();
@@ -874,7 +840,7 @@ class PcgSolver final : public LinearSolver {
         m_warped.segment<3>(3 * Eigen::Index(d)).noalias() = m_warp[d].transpose() * r.segment<3>(3 * Eigen::Index(d));
     }
     const VecX& rhs = warped ? m_warped : r;
-    if (!(m_single ? m_front->solve_single(rhs, z) : m_front->solve(rhs, z))) {
+    if (!(m_single ? m_front->solve_single(rhs, z, m_executor) : m_front->solve(rhs, z))) {
       z = r;
       return;
     }

@@ -1,0 +1,191 @@
+#include "supernodal_solve.hpp"
+
+#include <algorithm>
+#include <numeric>
+
+#include "octocut/sim/parallel.hpp"
+
+extern "C" {
+// Single-precision BLAS (the BLAS CHOLMOD links, OpenBLAS on Debian).
+void strsv_(const char* uplo, const char* trans, const char* diag, const int* n, const float* a, const int* lda,
+            float* x, const int* incx);
+void sgemv_(const char* trans, const int* m, const int* n, const float* alpha, const float* a, const int* lda,
+            const float* x, const int* incx, const float* beta, float* y, const int* incy);
+}
+
+namespace octocut::sim {
+
+namespace {
+
+// The longer part's work after dealing the subtrees `pieces` (their work `sub`), heaviest first, each to the part
+// with less so far; `bins` receives each piece's part.
+double deal(const std::vector<int>& pieces, const std::vector<double>& sub, std::vector<int>& bins) {
+  std::vector<int> order(pieces.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return sub[std::size_t(pieces[std::size_t(a)])] > sub[std::size_t(pieces[std::size_t(b)])];
+  });
+  double load[2] = {0.0, 0.0};
+  bins.assign(pieces.size(), 0);
+  for (const int i : order) {
+    const int p = load[1] < load[0] ? 1 : 0;
+    bins[std::size_t(i)] = p;
+    load[p] += sub[std::size_t(pieces[std::size_t(i)])];
+  }
+  return std::max(load[0], load[1]);
+}
+
+}  // namespace
+
+void SupernodalSolvePlan::build(const SupernodalStructure& L) {
+  const int ns = L.nsuper;
+  m_super_of.assign(std::size_t(L.n), 0);
+  for (int s = 0; s < ns; ++s) std::fill(m_super_of.begin() + L.super[s], m_super_of.begin() + L.super[s + 1], s);
+
+  // The supernodal elimination tree: a supernode's parent holds its first row below its own columns. Postorder:
+  // children come before their parent, so one ascending pass sums the subtrees.
+  const auto nsz = std::size_t(ns);
+  std::vector<int> parent(nsz, -1);
+  std::vector<double> cost(nsz, 0.0), sub(nsz, 0.0);  // entries of L: the supernode's, its subtree's
+  m_first.resize(nsz);
+  std::iota(m_first.begin(), m_first.end(), 0);
+  std::vector<std::vector<int>> children(nsz);
+  for (int s = 0; s < ns; ++s) {
+    const int nscol = L.super[s + 1] - L.super[s], nsrow = L.pi[s + 1] - L.pi[s];
+    cost[std::size_t(s)] = double(nscol) * double(nsrow);
+    sub[std::size_t(s)] += cost[std::size_t(s)];
+    if (nsrow > nscol) parent[std::size_t(s)] = m_super_of[std::size_t(L.rows[L.pi[s] + nscol])];
+    const int p = parent[std::size_t(s)];
+    if (p < 0) continue;
+    sub[std::size_t(p)] += sub[std::size_t(s)];
+    m_first[std::size_t(p)] = std::min(m_first[std::size_t(p)], m_first[std::size_t(s)]);
+    children[std::size_t(p)].push_back(s);
+  }
+
+  // Split the heaviest subtree at its root while that helps: the time is the top's work plus the longer part's.
+  std::vector<int> pieces, bins, split;
+  for (int s = 0; s < ns; ++s)
+    if (parent[std::size_t(s)] < 0) pieces.push_back(s);
+  double top = 0.0;
+  double best = deal(pieces, sub, bins);
+  std::vector<int> best_pieces = pieces, best_bins = bins;
+  std::size_t best_split = 0;
+  for (int round = 0; round < 256 && !pieces.empty(); ++round) {
+    const auto heaviest = std::max_element(pieces.begin(), pieces.end(), [&](int a, int b) {
+      return sub[std::size_t(a)] < sub[std::size_t(b)];
+    });
+    const int h = *heaviest;
+    if (children[std::size_t(h)].empty()) break;
+    pieces.erase(heaviest);
+    pieces.insert(pieces.end(), children[std::size_t(h)].begin(), children[std::size_t(h)].end());
+    split.push_back(h);
+    top += cost[std::size_t(h)];
+    const double t = top + deal(pieces, sub, bins);
+    if (t < best) {
+      best = t;
+      best_pieces = pieces;
+      best_bins = bins;
+      best_split = split.size();
+    }
+  }
+
+  // The chosen partition: each part's roots ascending, the top (the split supernodes) ascending, and its columns.
+  m_work = {0.0, 0.0, 0.0};
+  for (Part& p : m_parts) {
+    p.roots.clear();
+    p.updates.assign(std::size_t(L.n), 0.0f);
+  }
+  for (std::size_t i = 0; i < best_pieces.size(); ++i) {
+    m_parts[std::size_t(best_bins[i])].roots.push_back(best_pieces[i]);
+    m_work[std::size_t(best_bins[i])] += sub[std::size_t(best_pieces[i])];
+  }
+  for (Part& p : m_parts) std::sort(p.roots.begin(), p.roots.end());
+  m_top.assign(split.begin(), split.begin() + std::ptrdiff_t(best_split));
+  std::sort(m_top.begin(), m_top.end());
+  m_top_cols.clear();
+  for (const int s : m_top) {
+    m_work[2] += cost[std::size_t(s)];
+    for (int j = L.super[s]; j < L.super[s + 1]; ++j) m_top_cols.push_back(j);
+  }
+}
+
+void SupernodalSolvePlan::forward_range(const SupernodalStructure& L, const float* values, float* y, int first,
+                                        int last, int root, Part* part) {
+  std::vector<float>& t = part ? part->t : m_t;
+  const int one = 1;
+  const float f1 = 1.0f, f0 = 0.0f;
+  for (int sn = first; sn <= last; ++sn) {
+    int k1 = L.super[sn], nscol = L.super[sn + 1] - k1, nsrow = L.pi[sn + 1] - L.pi[sn];
+    const float* Ls = values + L.px[sn];
+    strsv_("L", "N", "N", &nscol, Ls, &nsrow, y + k1, &one);
+    int nb = nsrow - nscol;  // the rows below: t = L_below y_diag, then scattered
+    if (nb == 0) continue;
+    t.resize(std::size_t(nb));
+    sgemv_("N", &nb, &nscol, &f1, Ls + nscol, &nsrow, y + k1, &one, &f0, t.data(), &one);
+    const int* r = L.rows + L.pi[sn] + nscol;
+    if (part == nullptr) {
+      for (int i = 0; i < nb; ++i) y[r[i]] -= t[std::size_t(i)];
+      continue;
+    }
+    // Rows in the subtree are the part's alone; the others are the top's, gathered per part.
+    for (int i = 0; i < nb; ++i) {
+      if (m_super_of[std::size_t(r[i])] <= root)
+        y[r[i]] -= t[std::size_t(i)];
+      else
+        part->updates[std::size_t(r[i])] += t[std::size_t(i)];
+    }
+  }
+}
+
+void SupernodalSolvePlan::backward_range(const SupernodalStructure& L, const float* values, float* y, int first,
+                                         int last, std::vector<float>& t) {
+  const int one = 1;
+  const float f1 = 1.0f, fm1 = -1.0f;
+  for (int sn = last; sn >= first; --sn) {
+    int k1 = L.super[sn], nscol = L.super[sn + 1] - k1, nsrow = L.pi[sn + 1] - L.pi[sn];
+    const float* Ls = values + L.px[sn];
+    int nb = nsrow - nscol;
+    if (nb > 0) {
+      const int* r = L.rows + L.pi[sn] + nscol;
+      t.resize(std::size_t(nb));
+      for (int i = 0; i < nb; ++i) t[std::size_t(i)] = y[r[i]];
+      sgemv_("T", &nb, &nscol, &fm1, Ls + nscol, &nsrow, t.data(), &one, &f1, y + k1, &one);
+    }
+    strsv_("L", "T", "N", &nscol, Ls, &nsrow, y + k1, &one);
+  }
+}
+
+void SupernodalSolvePlan::forward(const SupernodalStructure& L, const float* values, float* y, Executor* executor) {
+  // The parts' subtrees, side by side; then their updates of the top, in part order; then the top.
+  const auto parts = [&](int b, int e) {
+    for (int p = b; p < e; ++p)
+      for (const int root : m_parts[std::size_t(p)].roots)
+        forward_range(L, values, y, m_first[std::size_t(root)], root, root, &m_parts[std::size_t(p)]);
+  };
+  if (executor != nullptr)
+    executor->parallel_for(2, 1, parts);
+  else
+    parts(0, 2);
+  for (const int j : m_top_cols)
+    for (Part& p : m_parts) {
+      y[j] -= p.updates[std::size_t(j)];
+      p.updates[std::size_t(j)] = 0.0f;
+    }
+  for (const int s : m_top) forward_range(L, values, y, s, s, -1, nullptr);
+}
+
+void SupernodalSolvePlan::backward(const SupernodalStructure& L, const float* values, float* y, Executor* executor) {
+  // The top first (descending), then the parts' subtrees side by side: each reads only rows above it.
+  for (auto s = m_top.rbegin(); s != m_top.rend(); ++s) backward_range(L, values, y, *s, *s, m_t);
+  const auto parts = [&](int b, int e) {
+    for (int p = b; p < e; ++p)
+      for (auto root = m_parts[std::size_t(p)].roots.rbegin(); root != m_parts[std::size_t(p)].roots.rend(); ++root)
+        backward_range(L, values, y, m_first[std::size_t(*root)], *root, m_parts[std::size_t(p)].t);
+  };
+  if (executor != nullptr)
+    executor->parallel_for(2, 1, parts);
+  else
+    parts(0, 2);
+}
+
+}  // namespace octocut::sim

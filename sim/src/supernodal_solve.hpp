@@ -1,0 +1,63 @@
+#pragma once
+// Triangular solves with a supernodal Cholesky factor L (CHOLMOD's layout, single-precision values) on two threads.
+// Private to sim/src: the preconditioner's solves, which PCG applies once per iteration, are bound by the latency of
+// many small dense kernels, not by memory bandwidth (one core streams 20 GB/s here, the solves reach 9), so they gain
+// from a second core. The supernodal elimination tree is cut into disjoint subtrees, dealt to two parts of about
+// equal work, and the supernodes above them (the "top") are solved by one thread: in the forward solve after the
+// parts, in the backward solve before them.
+#include <array>
+#include <vector>
+
+namespace octocut::sim {
+
+class Executor;
+
+/// The symbolic structure of a supernodal factor (CHOLMOD's): supernode s holds columns super[s] .. super[s + 1) as
+/// a column-major nsrow x nscol block at values + px[s], its rows listed at rows[pi[s]] .. rows[pi[s + 1]) (the
+/// first nscol are its own columns). Supernodes are postordered: every subtree of the elimination tree is a
+/// contiguous range of supernodes ending at its root.
+struct SupernodalStructure {
+  int n = 0;                   ///< columns
+  int nsuper = 0;              ///< supernodes
+  const int* super = nullptr;  ///< first column of each supernode (nsuper + 1)
+  const int* pi = nullptr;     ///< start of each supernode's rows in `rows` (nsuper + 1)
+  const int* px = nullptr;     ///< start of each supernode's values (nsuper + 1)
+  const int* rows = nullptr;   ///< row indices (pi[nsuper])
+};
+
+/// How the solves split the elimination tree between two threads, and the solves themselves. The arithmetic is the
+/// same whatever the executor's thread count (the parts' updates of the top columns are gathered per part and
+/// applied in part order), so results are bit-identical with one thread and with two.
+class SupernodalSolvePlan {
+ public:
+  /// Partitions the tree of `L` (see the file comment): splits the heaviest subtree at its root while that shortens
+  /// the longer part plus the top, in work counted as entries of L.
+  void build(const SupernodalStructure& L);
+  /// y = L^-1 y in place (n), with L's values `values` (px[nsuper]).
+  void forward(const SupernodalStructure& L, const float* values, float* y, Executor* executor);
+  /// y = L^-T y in place (n).
+  void backward(const SupernodalStructure& L, const float* values, float* y, Executor* executor);
+  /// Entries of L in each part's subtrees and in the top (for tests and benchmarks).
+  [[nodiscard]] std::array<double, 3> work() const { return m_work; }
+
+ private:
+  struct Part {
+    std::vector<int> roots;      ///< roots of the part's subtrees, ascending
+    std::vector<float> updates;  ///< forward: the part's updates of top columns (n; zero between solves)
+    std::vector<float> t;        ///< work: the rows below a supernode
+  };
+  void forward_range(const SupernodalStructure& L, const float* values, float* y, int first, int last, int root,
+                     Part* part);
+  void backward_range(const SupernodalStructure& L, const float* values, float* y, int first, int last,
+                      std::vector<float>& t);
+
+  std::vector<int> m_super_of;  ///< supernode of each column (n)
+  std::vector<int> m_first;     ///< first supernode of each supernode's subtree (nsuper)
+  std::vector<int> m_top;       ///< supernodes in no part's subtree, ascending
+  std::vector<int> m_top_cols;  ///< the columns of the top supernodes that the parts update, ascending
+  std::array<Part, 2> m_parts;
+  std::vector<float> m_t;       ///< work of the top's solves
+  std::array<double, 3> m_work{};
+};
+
+}  // namespace octocut::sim

@@ -38,26 +38,18 @@ void push_sample(ContactSamples& out, const Vec3& rest, double area, int face, c
   out.begin.push_back(int(out.dofs.size()));
 }
 
-// The entry (r, c) of A's pattern, or null.
-double* entry(SpMat& A, int r, int c) {
+// The offset of entry (r, c) in A's pattern, or -1.
+std::ptrdiff_t entry(const SpMat& A, int r, int c) {
   const int* outer = A.outerIndexPtr();
   const int* inner = A.innerIndexPtr();
   const int* b = inner + outer[c];
   const int* e = inner + outer[c + 1];
   const int* it = std::lower_bound(b, e, r);
-  return (it != e && *it == r) ? A.valuePtr() + (it - inner) : nullptr;
+  return (it != e && *it == r) ? it - inner : -1;
 }
 
-// Adds the 3x3 block B at block (i, j) of A; false when the block is outside the pattern.
-bool add_block(SpMat& A, int i, int j, const Mat3& B) {
-  for (int c = 0; c < 3; ++c) {
-    double* col = entry(A, 3 * i, 3 * j + c);
-    if (!col) return false;
-    // Rows 3i, 3i+1, 3i+2 of a column are adjacent in the pattern (blocks are dense).
-    for (int r = 0; r < 3; ++r) col[r] += B(r, c);
-  }
-  return true;
-}
+// Whether block (i, j) is in A's pattern (blocks are dense: its first entry decides).
+bool has_block(const SpMat& A, int i, int j) { return entry(A, 3 * i, 3 * j) >= 0; }
 
 // The stiffness K and damping C (3x3) of one contact and its force f0 before the velocity terms, for the relative
 // velocity `rel` (sample minus rigid point) at the start of the step. Returns true when it slides.
@@ -154,8 +146,9 @@ ContactSamples build_contact_samples(const ObjectModel& model, const TriMesh& su
   return out;
 }
 
-void add_contact_terms(const std::vector<Contact>& contacts, double dt, const std::vector<Vec3>& v,
-                       const std::vector<char>& constrained, const VecX& dv_c, SpMat& A, VecX& rhs) {
+void contact_system_terms(const std::vector<Contact>& contacts, double dt, const std::vector<Vec3>& v,
+                          const std::vector<char>& constrained, const VecX& dv_c, const SpMat& pattern,
+                          std::vector<SystemBlock>& blocks, VecX& rhs) {
   for (const Contact& c : contacts) {
     Mat3 K, C;
     Vec3 f0;
@@ -171,17 +164,34 @@ void add_contact_terms(const std::vector<Contact>& contacts, double dt, const st
         if (constrained[std::size_t(q.dof)]) {
           // Free row, prescribed column: to the right-hand side.
           rhs.segment<3>(3 * p.dof) -= B * dv_c.segment<3>(3 * q.dof);
-        } else if (!add_block(A, p.dof, q.dof, B)) {
+        } else if (has_block(pattern, p.dof, q.dof)) {
+          blocks.push_back({p.dof, q.dof, B});
+        } else {
           // Outside the pattern (a row that spans leaves, as a vertex outside every leaf has): lump onto the two
           // diagonals with |w_p w_q|. With the mirrored pair this adds |w_p w_q| (e_p -+ e_q)(e_p -+ e_q)^T (x) S
           // >= 0 to the exact term, so A stays symmetric positive definite whatever the weights' signs.
           const Mat3 L = (0.5 * std::abs(p.weight * q.weight)) * S;
-          add_block(A, p.dof, p.dof, L);
-          add_block(A, q.dof, q.dof, L);
+          blocks.push_back({p.dof, p.dof, L});
+          blocks.push_back({q.dof, q.dof, L});
         }
       }
     }
   }
+}
+
+void add_system_blocks(const std::vector<SystemBlock>& blocks, SpMat& A) {
+  double* val = A.valuePtr();
+  for (const SystemBlock& b : blocks)
+    for (int c = 0; c < 3; ++c) {
+      // Rows 3 row, 3 row + 1, 3 row + 2 of a column are adjacent in the pattern (blocks are dense).
+      const std::ptrdiff_t at = entry(A, 3 * b.row, 3 * b.col + c);
+      if (at < 0) continue;  // not for this pattern
+      for (int r = 0; r < 3; ++r) val[at + r] += b.value(r, c);
+    }
+}
+
+void add_block_products(const std::vector<SystemBlock>& blocks, const VecX& x, VecX& y) {
+  for (const SystemBlock& b : blocks) y.segment<3>(3 * b.row) += b.value * x.segment<3>(3 * b.col);
 }
 
 std::vector<ContactOutcome> contact_outcomes(const std::vector<Contact>& contacts, double dt,

@@ -195,6 +195,45 @@ struct FemSystem::Impl {
     }
   }
 
+  // The rotated element matrix kc R K R^T of element e applied to the element's slots of x, counting only the
+  // entries of unconstrained DOFs (want_constrained false) or only those of constrained ones (true) (24).
+  Vec24 element_product(int e, double kc, const ElementFrame& frame, const std::vector<char>& constrained,
+                        bool want_constrained, const VecX& x) const {
+    Vec24 local = Vec24::Zero();
+    for (const GatherEntry& g : gather[std::size_t(e)])
+      if (bool(constrained[std::size_t(g.dof)]) == want_constrained)
+        local.segment<3>(3 * g.corner) += g.w * x.segment<3>(3 * g.dof);
+    const Mat3& R = frame.rotation[std::size_t(e)];
+    for (int a = 0; a < 8; ++a) local.segment<3>(3 * a) = R.transpose() * local.segment<3>(3 * a);
+    const Vec24 kl = (kc * model().stiffness_scale()[std::size_t(e)]) * (model().unit_stiffness() * local);
+    Vec24 out;
+    for (int a = 0; a < 8; ++a) out.segment<3>(3 * a) = R * kl.segment<3>(3 * a);
+    return out;
+  }
+
+  // Adds kc K x~ (x~: x with the constrained DOFs' entries zero) to the rows of unconstrained DOFs in [lo, hi) of
+  // y, over `elements` in ascending order (see scatter).
+  void product_part(const std::vector<int>& elements, int lo, int hi, double kc, const ElementFrame& frame,
+                    const std::vector<char>& constrained, const VecX& x, VecX& y) const {
+    for (const int e : elements) {
+      const Vec24 ke = element_product(e, kc, frame, constrained, false, x);
+      for (const GatherEntry& g : gather[std::size_t(e)])
+        if (g.dof >= lo && g.dof < hi && !constrained[std::size_t(g.dof)])
+          y.segment<3>(3 * g.dof) += g.w * ke.segment<3>(3 * g.corner);
+    }
+  }
+
+  // The parts of the DOFs for the executor's threads (see part_dof), rebuilt when stale.
+  int ensure_parts() {
+    const int nd = model().num_dofs();
+    const int parts = std::max(1, std::min(executor_ptr->threads(), nd));
+    if (int(part_elements.size()) != parts || part_dof.back() != nd || parts_stale) {
+      build_parts(parts);
+      parts_stale = false;
+    }
+    return parts;
+  }
+
   Impl(const ObjectModel& m, Executor& ex) : model_ptr(&m), executor_ptr(&ex) {
     const DofMap& dm = m.dofs();
     const int ne = m.num_elements();
@@ -466,11 +505,7 @@ void FemSystem::assemble_system(double mc, double kc, const ElementFrame& frame,
   double* val = A.valuePtr();
   std::fill(val, val + A.nonZeros(), 0.0);
   coupling.setZero(3 * nd);
-  const int parts = std::max(1, std::min(im.executor_ptr->threads(), nd));
-  if (int(im.part_elements.size()) != parts || im.part_dof.back() != nd || im.parts_stale) {
-    im.build_parts(parts);
-    im.parts_stale = false;
-  }
+  const int parts = im.ensure_parts();
   im.executor_ptr->parallel_for(parts, 1, [&](int tb, int te) {
     for (int t = tb; t < te; ++t)
       im.scatter(im.part_elements[std::size_t(t)], im.part_dof[std::size_t(t)], im.part_dof[std::size_t(t) + 1], kc,
@@ -487,6 +522,44 @@ void FemSystem::assemble_system(double mc, double kc, const ElementFrame& frame,
         val[im.diag_offsets[std::size_t(i)]] += mc * m.dof_mass()[std::size_t(d)];
       }
     }
+  }
+}
+
+void FemSystem::system_product(double mc, double kc, const ElementFrame& frame, const std::vector<char>& constrained,
+                               const VecX& x, VecX& y) {
+  Impl& im = *m_impl;
+  const ObjectModel& m = im.model();
+  const int nd = m.num_dofs();
+  y.setZero(3 * nd);
+  if (nd == 0) return;
+  // Stiffness by parts of the rows, in parallel (as the assembly's scatter); then the lumped mass, and identity
+  // rows for the constrained DOFs.
+  const int parts = im.ensure_parts();
+  im.executor_ptr->parallel_for(parts, 1, [&](int tb, int te) {
+    for (int t = tb; t < te; ++t)
+      im.product_part(im.part_elements[std::size_t(t)], im.part_dof[std::size_t(t)], im.part_dof[std::size_t(t) + 1],
+                      kc, frame, constrained, x, y);
+  });
+  for (int d = 0; d < nd; ++d) {
+    if (constrained[std::size_t(d)])
+      y.segment<3>(3 * d) = x.segment<3>(3 * d);
+    else
+      y.segment<3>(3 * d) += (mc * m.dof_mass()[std::size_t(d)]) * x.segment<3>(3 * d);
+  }
+}
+
+void FemSystem::system_coupling(double kc, const ElementFrame& frame, const std::vector<char>& constrained,
+                                const VecX& u, VecX& coupling) const {
+  const Impl& im = *m_impl;
+  coupling.setZero(3 * im.model().num_dofs());
+  // The elements with a constrained DOF, in ascending order: their matrices against u's constrained entries.
+  for (int e = 0; e < int(im.gather.size()); ++e) {
+    const auto& g = im.gather[std::size_t(e)];
+    if (std::none_of(g.begin(), g.end(), [&](const GatherEntry& p) { return constrained[std::size_t(p.dof)]; }))
+      continue;
+    const Vec24 ke = im.element_product(e, kc, frame, constrained, true, u);
+    for (const GatherEntry& p : g)
+      if (!constrained[std::size_t(p.dof)]) coupling.segment<3>(3 * p.dof) += p.w * ke.segment<3>(3 * p.corner);
   }
 }
 

@@ -55,6 +55,23 @@ void symmetric_product(const SpMat& A, const VecX& x, VecX& y, Executor* executo
     executor->parallel_for(n, 2048, rows);
 }
 
+// A stored matrix as a SystemOperator: products by symmetric_product on the executor's threads.
+class MatrixOperator final : public SystemOperator {
+ public:
+  void set(const SpMat& A, Executor* executor) {
+    m_A = &A;
+    m_executor = executor;
+  }
+  [[nodiscard]] Eigen::Index rows() const override { return m_A->rows(); }
+  [[nodiscard]] Eigen::Index nonzeros() const override { return m_A->nonZeros(); }
+  void product(const VecX& x, VecX& y) override { symmetric_product(*m_A, x, y, m_executor); }
+  const SpMat& matrix() override { return *m_A; }
+
+ private:
+  const SpMat* m_A = nullptr;
+  Executor* m_executor = nullptr;
+};
+
 // Supernodal LL^T through CHOLMOD, called directly so that the symbolic analysis can run on the block graph. The
 // FEM system matrix is made of dense 3 x 3 blocks (one per pair of coupled DOFs). Its fill-reducing ordering (AMD)
 // and its supernodal symbolic factorisation are computed on the graph of blocks (num_dofs nodes, 9x fewer entries
@@ -624,9 +641,13 @@ class PcgSolver final : public LinearSolver {
     m_have_factor = false;
   }
   bool factorize(const SpMat& A) override {
+    m_stored.set(A, m_executor);
+    return factorize_operator(m_stored);
+  }
+  bool factorize_operator(SystemOperator& A) override {
     m_A = &A;
     if (!m_use_cholesky) {
-      m_inv_diag = A.diagonal();
+      m_inv_diag = A.matrix().diagonal();
       for (Eigen::Index i = 0; i < m_inv_diag.size(); ++i) {
         if (!(m_inv_diag[i] > 0.0)) return false;
         m_inv_diag[i] = 1.0 / m_inv_diag[i];
@@ -708,7 +729,7 @@ class PcgSolver final : public LinearSolver {
   // until the new pattern's first factor, computed in the background, is due (factor_lag_solves solves later, as a
   // refresh). Falls back to an inline factorisation when the bridge cannot be built.
   bool start_bridge() {
-    if (!m_bridge->build(*m_A)) {
+    if (!m_bridge->build(m_A->matrix())) {
       m_bridge.reset();
       return refactor();
     }
@@ -723,12 +744,12 @@ class PcgSolver final : public LinearSolver {
     drop_pending();
     if (!m_front->analyzed()) {
       try {
-        m_front->analyze(*m_A);
+        m_front->analyze(m_A->matrix());
       } catch (const std::exception&) {
         return m_have_factor = false;
       }
     }
-    m_have_factor = m_front->factorize(*m_A);
+    m_have_factor = m_front->factorize(m_A->matrix());
     if (m_have_factor) {  // the solves use it from now on, also when they were bridged
       m_bridging = false;
       m_bridge.reset();
@@ -748,7 +769,7 @@ class PcgSolver final : public LinearSolver {
   // the step keeps the other core busy).
   void start_pending() {
     m_pending = std::make_unique<BackgroundFactorization>();
-    m_pending->A = *m_A;
+    m_pending->A = m_A->matrix();
     m_pending->factor = m_back ? std::move(m_back) : std::make_unique<CholmodFactor>();
     m_pending->factor->keep_single(m_single);
     m_pending->factor->thorough_ordering(m_opt.thorough_ordering);
@@ -809,7 +830,7 @@ class PcgSolver final : public LinearSolver {
   }
   // Operations of one PCG iteration with the factor: solves with L and L^T, a product with A, five vector updates.
   [[nodiscard]] double iteration_flops() const {
-    return 4.0 * priced().factor_entries() + 2.0 * double(m_A->nonZeros()) + 10.0 * double(m_A->rows());
+    return 4.0 * priced().factor_entries() + 2.0 * double(m_A->nonzeros()) + 10.0 * double(m_A->rows());
   }
   // A factorisation's price in iteration operations (see the class comment).
   [[nodiscard]] double purchase_price() const { return priced().factor_flops() / m_opt.factor_flop_advantage; }
@@ -822,7 +843,7 @@ class PcgSolver final : public LinearSolver {
     if (!m_use_cholesky)
       z = m_inv_diag.cwiseProduct(r);
     else if (!m_fast.empty())
-      m_fast.apply(*m_A, r, z, [&](const VecX& rr, VecX& w) { apply_factor(rr, w); });
+      m_fast.apply(m_A->matrix(), r, z, [&](const VecX& rr, VecX& w) { apply_factor(rr, w); });
     else
       apply_factor(r, z);
   }
@@ -830,7 +851,7 @@ class PcgSolver final : public LinearSolver {
   // memory: an unpreconditioned step).
   void apply_factor(const VecX& r, VecX& z) {
     if (m_bridging) {
-      m_bridge->apply(*m_A, r, z, m_single, m_executor);
+      m_bridge->apply(m_A->matrix(), r, z, m_single, m_executor);
       return;
     }
     const bool warped = !m_warp.empty();
@@ -884,10 +905,14 @@ class PcgSolver final : public LinearSolver {
     else if (m_use_cholesky && m_have_factor)
       std::set_union(m_fast_now.begin(), m_fast_now.end(), m_fast_front.begin(), m_fast_front.end(),
                      std::back_inserter(region));
-    m_fast.build(*m_A, std::move(region));  // on failure the region is empty: PCG checks A's definiteness itself
+    // On failure the region is empty: PCG checks A's definiteness itself. Only a region needs A's entries.
+    if (region.empty())
+      m_fast.build(SpMat(), {});
+    else
+      m_fast.build(m_A->matrix(), std::move(region));
   }
   void run_pcg(const VecX& b, VecX& x, SolveInfo& info, int max_iterations) {
-    const SpMat& A = *m_A;
+    SystemOperator& A = *m_A;
     const double bn = b.norm();
     if (!(bn > 0.0)) {
       x.setZero();
@@ -895,7 +920,7 @@ class PcgSolver final : public LinearSolver {
       return;
     }
     VecX r;
-    symmetric_product(A, x, r, m_executor);
+    A.product(x, r);
     r = b - r;
     double rn = r.norm();
     VecX z, p, Ap;
@@ -904,7 +929,7 @@ class PcgSolver final : public LinearSolver {
     double rz = r.dot(z);
     int it = 0;
     while (rn / bn > m_opt.tolerance && it < max_iterations) {
-      symmetric_product(A, p, Ap, m_executor);
+      A.product(p, Ap);
       const double pAp = p.dot(Ap);
       // A non-positive curvature means A (or the preconditioner) is not SPD.
       if (!(pAp > 0.0) || !(rz > 0.0) || !std::isfinite(rz)) break;
@@ -937,7 +962,8 @@ class PcgSolver final : public LinearSolver {
   int m_solves_since_factor = 0;
   int m_baseline = 0;   ///< fewest iterations of a solve one step or more after the factorisation
   VecX m_inv_diag;
-  const SpMat* m_A = nullptr;
+  SystemOperator* m_A = nullptr;   ///< the matrix of the solves (factorize_operator)
+  MatrixOperator m_stored;         ///< the operator of a matrix given to factorize()
   Executor* m_executor = nullptr;  ///< runs the products with A (null: the calling thread)
   std::vector<int> m_fast_now;     ///< the fast DOFs of the current matrix (set_fast_dofs)
   std::vector<int> m_fast_front;   ///< those of the matrix the front factor was computed from

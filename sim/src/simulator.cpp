@@ -26,6 +26,44 @@ VecX flatten(const std::vector<Vec3>& v) {
   return out;
 }
 
+// The implicit Euler system of one attempt, A = m M + k K + the contact blocks (constrained rows and columns
+// identity), as the solver's operator: its products apply the element matrices and the blocks directly
+// (FemSystem::system_product), and it is assembled into `storage` only when the solver asks for its entries (to
+// factorise it, or to solve the contacts' region exactly). A step whose solver needs neither skips the assembly.
+class StepSystem final : public SystemOperator {
+ public:
+  StepSystem(FemSystem& fem, const ElementFrame& frame, double m, double k, const std::vector<char>& constrained,
+             SpMat& storage)
+      : m_fem(fem), m_frame(frame), m_m(m), m_k(k), m_constrained(constrained), m_storage(storage),
+        m_nonzeros(fem.system_pattern(constrained).nonZeros()) {}
+  std::vector<SystemBlock> contact;  ///< the contacts' blocks (contact_system_terms)
+
+  [[nodiscard]] Eigen::Index rows() const override { return 3 * Eigen::Index(m_constrained.size()); }
+  [[nodiscard]] Eigen::Index nonzeros() const override { return m_nonzeros; }
+  void product(const VecX& x, VecX& y) override {
+    m_fem.system_product(m_m, m_k, m_frame, m_constrained, x, y);
+    add_block_products(contact, x, y);
+  }
+  const SpMat& matrix() override {
+    if (!m_assembled) {
+      VecX coupling;  // the step took it from FemSystem::system_coupling
+      m_fem.assemble_system(m_m, m_k, m_frame, m_constrained, VecX::Zero(rows()), m_storage, coupling);
+      add_system_blocks(contact, m_storage);
+      m_assembled = true;
+    }
+    return m_storage;
+  }
+
+ private:
+  FemSystem& m_fem;
+  const ElementFrame& m_frame;
+  double m_m, m_k;  // the mass's and the stiffness's coefficients
+  const std::vector<char>& m_constrained;
+  SpMat& m_storage;
+  Eigen::Index m_nonzeros;
+  bool m_assembled = false;
+};
+
 // Milliseconds since t0, and t0 moved on to now: the times of stages run one after another.
 double lap(Clock::time_point& t0) {
   const double ms = ms_since(t0);
@@ -163,7 +201,7 @@ void Simulator::remove_object() {
 void Simulator::analyze_if_needed() {
   // The symbolic analysis is reused for the whole revision.
   if (m_pattern_analyzed) return;
-  m_solver->analyze_pattern(m_A);
+  m_solver->analyze_pattern(m_fem->system_pattern(m_constrained));
   m_pattern_analyzed = true;
 }
 
@@ -205,12 +243,16 @@ bool Simulator::solve_increment(double dt, const VecX& dv_c, VecX& dv) {
                    (beta + dt) * kv.segment<3>(3 * d);
     rhs.segment<3>(3 * d) = dt * f;
   }
+  // The system as an operator (assembled only if the solver asks), and the prescribed DOFs' coupling.
+  StepSystem system(*m_fem, frame, 1.0 + dt * alpha, dt * beta + dt * dt, m_constrained, m_A);
   VecX coupling;
-  m_fem->assemble_system(1.0 + dt * alpha, dt * beta + dt * dt, frame, m_constrained, dv_c, m_A, coupling);
+  m_fem->system_coupling(dt * beta + dt * dt, frame, m_constrained, dv_c, coupling);
   rhs -= coupling;
   m_profile.assembly = lap(t0);
   // Contact: penalty stiffness and damping in the system matrix, so stiff contact is stable at dt.
-  if (!m_contacts.empty()) add_contact_terms(m_contacts, dt, m_state.v, m_constrained, dv_c, m_A, rhs);
+  if (!m_contacts.empty())
+    contact_system_terms(m_contacts, dt, m_state.v, m_constrained, dv_c, m_fem->system_pattern(m_constrained),
+                         system.contact, rhs);
   for (int d = 0; d < nd; ++d)
     if (m_constrained[std::size_t(d)]) rhs.segment<3>(3 * d) = dv_c.segment<3>(3 * d);
   m_profile.contact = lap(t0);
@@ -219,7 +261,7 @@ bool Simulator::solve_increment(double dt, const VecX& dv_c, VecX& dv) {
   analyze_if_needed();
   m_solver->set_fast_dofs(contact_dofs());
   m_solver->set_dof_rotations(m_fem->dof_rotations(frame));
-  if (!m_solver->factorize(m_A)) {
+  if (!m_solver->factorize_operator(system)) {
     ++m_stats.solver_failures;
     return false;
   }

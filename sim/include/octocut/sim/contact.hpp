@@ -69,13 +69,26 @@ struct ContactOutcome {
   bool sliding = false;       ///< it slid (else it stuck)
 };
 
-/// Adds the contact terms to the implicit Euler system of one attempt of length dt: A += dt^2 K_c + dt C_c through
-/// each sample's row (entries outside A's pattern are lumped onto the two diagonals, which keeps A symmetric
-/// positive definite), and rhs += dt (f_0 - (dt K_c + C_c)(v_sample - v_rigid)). Rows and columns of constrained
-/// DOFs are left alone (their coupling moves to rhs with the prescribed increments dv_c). `A` is the assembled
-/// system matrix (3 num_dofs square, both triangles), v the DOF velocities (num_dofs).
-void add_contact_terms(const std::vector<Contact>& contacts, double dt, const std::vector<Vec3>& v,
-                       const std::vector<char>& constrained, const VecX& dv_c, SpMat& A, VecX& rhs);
+/// One 3 x 3 block of a system matrix: the rows of DOF `row` against the columns of DOF `col`.
+struct SystemBlock {
+  int row = 0;
+  int col = 0;
+  Mat3 value = Mat3::Zero();
+};
+
+/// The contact terms of the implicit Euler system of one attempt of length dt: A += dt^2 K_c + dt C_c through each
+/// sample's row, appended to `blocks` as they enter A (blocks outside A's pattern `pattern` are lumped onto the two
+/// diagonals, which keeps A symmetric positive definite), and rhs += dt (f_0 - (dt K_c + C_c)(v_sample - v_rigid)).
+/// Rows and columns of constrained DOFs are left alone (their coupling moves to rhs with the prescribed increments
+/// dv_c). `pattern` is the system matrix's pattern (3 num_dofs square, both triangles), v the DOF velocities
+/// (num_dofs).
+void contact_system_terms(const std::vector<Contact>& contacts, double dt, const std::vector<Vec3>& v,
+                          const std::vector<char>& constrained, const VecX& dv_c, const SpMat& pattern,
+                          std::vector<SystemBlock>& blocks, VecX& rhs);
+/// A += the blocks, each inside A's pattern (as contact_system_terms gives them for that pattern).
+void add_system_blocks(const std::vector<SystemBlock>& blocks, SpMat& A);
+/// y += the blocks times x, in the blocks' order (3 num_dofs).
+void add_block_products(const std::vector<SystemBlock>& blocks, const VecX& x, VecX& y);
 
 /// The force of each contact at the end of an attempt that started at DOF velocities v (num_dofs) and took the
 /// velocity increments dv (3 num_dofs).

@@ -45,6 +45,15 @@ class FemSystem {
   /// A_fc u_c of the unconstrained rows with the prescribed values u (only entries of constrained DOFs are read).
   void assemble_system(double m, double k, const ElementFrame& frame, const std::vector<char>& constrained,
                        const VecX& u, SpMat& A, VecX& coupling);
+  /// y = A x for the A assemble_system(m, k, frame, constrained, ...) would assemble, without assembling it: the
+  /// element matrices applied one by one (3 num_dofs). Each entry sums its elements in ascending order, as the
+  /// assembly does, on the executor's threads (bit-identical whatever their count).
+  void system_product(double m, double k, const ElementFrame& frame, const std::vector<char>& constrained,
+                      const VecX& x, VecX& y);
+  /// The coupling assemble_system returns (A_fc u_c: the unconstrained rows against the prescribed values u, of
+  /// which only the constrained DOFs' entries are read), without assembling A (3 num_dofs).
+  void system_coupling(double k, const ElementFrame& frame, const std::vector<char>& constrained, const VecX& u,
+                       VecX& coupling) const;
   /// The fixed sparsity pattern of the system matrix for the constrained flags (num_dofs), values zero; built once
   /// per flags and kept.
   const SpMat& system_pattern(const std::vector<char>& constrained);

@@ -20,6 +20,23 @@ struct SolveInfo {
   bool background = false;    ///< pcg: that factor was computed by a background refresh, not by this call
 };
 
+/// A symmetric positive definite system matrix that a solver can apply without its entries, and whose entries are
+/// assembled only when a solver asks for them (to factorise it, or to solve a region of it exactly). The FEM system
+/// applies its element matrices directly (FemSystem::system_product), so a step whose solver needs no entries skips
+/// the assembly.
+class SystemOperator {
+ public:
+  virtual ~SystemOperator() = default;
+  /// Rows (and columns) of A.
+  [[nodiscard]] virtual Eigen::Index rows() const = 0;
+  /// Entries of A's pattern (what a product with the assembled A reads; prices a PCG iteration).
+  [[nodiscard]] virtual Eigen::Index nonzeros() const = 0;
+  /// y = A x (rows()).
+  virtual void product(const VecX& x, VecX& y) = 0;
+  /// A with both triangles stored, assembled on the first call. The reference stays valid while the operator does.
+  virtual const SpMat& matrix() = 0;
+};
+
 /// A solver for symmetric positive definite systems A x = b (A given with both triangles stored).
 class LinearSolver {
  public:
@@ -29,6 +46,10 @@ class LinearSolver {
   /// Makes the solver ready for the numeric values of A (same pattern as analysed). Returns false when A is not
   /// positive definite.
   virtual bool factorize(const SpMat& A) = 0;
+  /// Like factorize(), for a matrix given as an operator: pcg applies it without its entries and assembles it only
+  /// when it factorises or solves a region exactly; the others factorise its assembled matrix. The operator must
+  /// outlive the solves that follow.
+  virtual bool factorize_operator(SystemOperator& A) { return factorize(A.matrix()); }
   /// Solves A x = b for the A last given to factorize(). x holds the warm start on entry (pcg).
   virtual SolveInfo solve(const VecX& b, VecX& x) = 0;
   [[nodiscard]] virtual std::string name() const = 0;

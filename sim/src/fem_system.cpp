@@ -138,6 +138,35 @@ struct FemSystem::Impl {
   std::vector<int> part_dof;
   std::vector<std::vector<int>> part_elements;
   bool parts_stale = true;
+  // The elements of each DOF (dof_element_ptr: num_dofs + 1, dof_element: ascending per DOF), built on first use.
+  std::vector<int> dof_element_ptr, dof_element;
+
+  // Builds dof_element_ptr and dof_element when not yet built.
+  void ensure_dof_elements() {
+    const int nd = model().num_dofs();
+    if (int(dof_element_ptr.size()) == nd + 1) return;
+    std::vector<int> ptr(std::size_t(nd) + 1, 0);
+    for (const auto& g : gather)
+      for (const GatherEntry& p : g) ++ptr[std::size_t(p.dof) + 1];
+    for (int d = 0; d < nd; ++d) ptr[std::size_t(d) + 1] += ptr[std::size_t(d)];
+    dof_element.assign(std::size_t(ptr.back()), 0);
+    std::vector<int> fill(ptr.begin(), ptr.end() - 1);
+    for (int e = 0; e < int(gather.size()); ++e)
+      for (const GatherEntry& p : gather[std::size_t(e)]) {
+        int& at = fill[std::size_t(p.dof)];
+        if (at == ptr[std::size_t(p.dof)] || dof_element[std::size_t(at) - 1] != e) dof_element[std::size_t(at++)] = e;
+      }
+    // A DOF that an element reaches through several corners is listed once: close the gaps.
+    std::vector<int> compact;
+    compact.reserve(dof_element.size());
+    dof_element_ptr.assign(std::size_t(nd) + 1, 0);
+    for (int d = 0; d < nd; ++d) {
+      compact.insert(compact.end(), dof_element.begin() + ptr[std::size_t(d)],
+                     dof_element.begin() + fill[std::size_t(d)]);
+      dof_element_ptr[std::size_t(d) + 1] = int(compact.size());
+    }
+    dof_element = std::move(compact);
+  }
 
   // Splits the DOFs into `parts` ranges and lists each range's elements (see part_dof).
   void build_parts(int parts) {
@@ -561,6 +590,74 @@ void FemSystem::system_coupling(double kc, const ElementFrame& frame, const std:
     for (const GatherEntry& p : g)
       if (!constrained[std::size_t(p.dof)]) coupling.segment<3>(3 * p.dof) += p.w * ke.segment<3>(3 * p.corner);
   }
+}
+
+SpMat FemSystem::system_columns(double mc, double kc, const ElementFrame& frame, const std::vector<char>& constrained,
+                                const std::vector<int>& dofs) {
+  Impl& im = *m_impl;
+  const ObjectModel& m = im.model();
+  const SpMat& pattern = system_pattern(constrained);
+  im.ensure_dof_elements();
+  const int* outer = pattern.outerIndexPtr();
+
+  // The columns' pattern: A's, copied.
+  SpMat out(pattern.rows(), 3 * Eigen::Index(dofs.size()));
+  std::vector<int> local(std::size_t(m.num_dofs()), -1);  // index of each DOF in `dofs`, or -1
+  std::size_t nnz = 0;
+  for (std::size_t i = 0; i < dofs.size(); ++i) {
+    local[std::size_t(dofs[i])] = int(i);
+    nnz += std::size_t(outer[3 * dofs[i] + 3] - outer[3 * dofs[i]]);
+  }
+  out.resizeNonZeros(Eigen::Index(nnz));
+  int* o_outer = out.outerIndexPtr();
+  int at = 0;
+  for (std::size_t i = 0; i < dofs.size(); ++i)
+    for (int c = 0; c < 3; ++c) {
+      const int col = 3 * dofs[i] + c;
+      o_outer[3 * i + std::size_t(c)] = at;
+      std::copy(pattern.innerIndexPtr() + outer[col], pattern.innerIndexPtr() + outer[col + 1],
+                out.innerIndexPtr() + at);
+      at += outer[col + 1] - outer[col];
+    }
+  o_outer[3 * dofs.size()] = at;
+  double* val = out.valuePtr();
+  std::fill(val, val + nnz, 0.0);
+
+  // The elements around the DOFs, ascending: the blocks of their rotated matrices in the DOFs' columns, added as the
+  // assembly adds them (pair_offsets); then the lumped mass, or the identity of a constrained DOF.
+  std::vector<int> elements;
+  for (const int q : dofs)
+    elements.insert(elements.end(), im.dof_element.begin() + im.dof_element_ptr[std::size_t(q)],
+                    im.dof_element.begin() + im.dof_element_ptr[std::size_t(q) + 1]);
+  std::sort(elements.begin(), elements.end());
+  elements.erase(std::unique(elements.begin(), elements.end()), elements.end());
+  const Mat24& unit_k = m.unit_stiffness();
+  for (const int e : elements) {
+    const Mat3& R = frame.rotation[std::size_t(e)];
+    const double ks = kc * m.stiffness_scale()[std::size_t(e)];
+    const auto& g = im.gather[std::size_t(e)];
+    const int* off = im.pair_offsets.data() + im.pair_begin[std::size_t(e)];
+    for (std::size_t pi = 0; pi < g.size(); ++pi)
+      for (std::size_t qi = 0; qi < g.size(); ++qi) {
+        const int* o = off + 3 * (pi * g.size() + qi);
+        const int i = local[std::size_t(g[qi].dof)];
+        if (i < 0 || o[0] < 0) continue;  // not a column asked for, or a constrained row or column
+        const Mat3 B = (ks * g[pi].w * g[qi].w) * (R * unit_k.block<3, 3>(3 * g[pi].corner, 3 * g[qi].corner) *
+                                                     R.transpose());
+        for (int c = 0; c < 3; ++c) {
+          double* dst = val + o_outer[3 * i + c] + (o[c] - outer[3 * g[qi].dof + c]);
+          for (int r = 0; r < 3; ++r) dst[r] += B(r, c);
+        }
+      }
+  }
+  for (std::size_t i = 0; i < dofs.size(); ++i) {
+    const int q = dofs[i];
+    const double diag = constrained[std::size_t(q)] ? 1.0 : mc * m.dof_mass()[std::size_t(q)];
+    for (int c = 0; c < 3; ++c)
+      val[o_outer[3 * i + std::size_t(c)] + (im.diag_offsets[3 * std::size_t(q) + std::size_t(c)] - outer[3 * q + c])] +=
+          diag;
+  }
+  return out;
 }
 
 }  // namespace octocut::sim

@@ -53,6 +53,16 @@ class StepSystem final : public SystemOperator {
     }
     return m_storage;
   }
+  SpMat columns(const std::vector<int>& dofs) override {
+    SpMat out = m_fem.system_columns(m_m, m_k, m_frame, m_constrained, dofs);
+    std::vector<int> local(m_constrained.size(), -1);  // index of each DOF in `dofs`, or -1
+    for (std::size_t i = 0; i < dofs.size(); ++i) local[std::size_t(dofs[i])] = int(i);
+    std::vector<SystemBlock> here;  // the contact blocks in these columns, numbered as out's
+    for (const SystemBlock& b : contact)
+      if (local[std::size_t(b.col)] >= 0) here.push_back({b.row, local[std::size_t(b.col)], b.value});
+    add_system_blocks(here, out);
+    return out;
+  }
 
  private:
   FemSystem& m_fem;

@@ -54,6 +54,11 @@ class FemSystem {
   /// which only the constrained DOFs' entries are read), without assembling A (3 num_dofs).
   void system_coupling(double k, const ElementFrame& frame, const std::vector<char>& constrained, const VecX& u,
                        VecX& coupling) const;
+  /// The columns of the DOFs `dofs` (ascending) of the A assemble_system(m, k, frame, constrained, ...) would
+  /// assemble, with A's pattern in those columns (3 num_dofs x 3 |dofs|; columns 3 i + c are column c of dofs[i]):
+  /// computed from the elements around those DOFs alone, without assembling the rest of A.
+  SpMat system_columns(double m, double k, const ElementFrame& frame, const std::vector<char>& constrained,
+                       const std::vector<int>& dofs);
   /// The fixed sparsity pattern of the system matrix for the constrained flags (num_dofs), values zero; built once
   /// per flags and kept.
   const SpMat& system_pattern(const std::vector<char>& constrained);

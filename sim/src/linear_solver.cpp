@@ -494,19 +494,25 @@ class LocalSolve {
   void solve_local(const VecX& rl) {
     if (!m_factor.solve(rl, m_zl)) m_zl.setZero(rl.size());
   }
-  // The rows of the DOFs `dofs` (ascending) of A's columns of those DOFs: A_CC, both triangles, 3 x 3 blocked.
+  // The rows of the DOFs `dofs` (ascending) of A's columns of those DOFs: A_CC, both triangles, 3 x 3 blocked. The
+  // columns' rows are sorted and the map is increasing, so each column's rows come out sorted.
   static SpMat rows_of(const SpMat& columns, const std::vector<int>& dofs, Eigen::Index n) {
     std::vector<int> map(std::size_t(n / 3), -1);
     for (std::size_t i = 0; i < dofs.size(); ++i) map[std::size_t(dofs[i])] = int(i);
-    std::vector<Eigen::Triplet<double>> t;
-    for (Eigen::Index k = 0; k < columns.cols(); ++k)
+    const Eigen::Index m = columns.cols();
+    std::vector<int> outer(std::size_t(m) + 1, 0), inner;
+    std::vector<double> values;
+    for (Eigen::Index k = 0; k < m; ++k) {
+      outer[std::size_t(k)] = int(inner.size());
       for (SpMat::InnerIterator it(columns, k); it; ++it) {
         const int j = map[std::size_t(it.row() / 3)];
-        if (j >= 0) t.emplace_back(3 * j + int(it.row() % 3), int(k), it.value());
+        if (j < 0) continue;
+        inner.push_back(3 * j + int(it.row() % 3));
+        values.push_back(it.value());
       }
-    SpMat out(columns.cols(), columns.cols());
-    out.setFromTriplets(t.begin(), t.end());
-    return out;
+    }
+    outer[std::size_t(m)] = int(inner.size());
+    return Eigen::Map<const SpMat>(m, m, Eigen::Index(inner.size()), outer.data(), inner.data(), values.data());
   }
 
   std::vector<int> m_dofs;   ///< the region C, ascending
@@ -578,15 +584,11 @@ class CutBridge {
       const int j = source[std::size_t(d)];
       in[std::size_t(d)] = !(copied[std::size_t(d)] && j >= 0 && reached[std::size_t(j)] == 1);
     }
-    std::vector<char> grown = in;  // and the DOFs coupled to those in A: the rows of their columns
-    std::vector<int> inside;
+    std::vector<char> grown = in;  // and the DOFs coupled to those in A (its pattern)
+    const SpMat& pattern = A.pattern();
     for (Eigen::Index k = 0; k < nb; ++k)
-      if (in[std::size_t(k)]) inside.push_back(int(k));
-    if (!inside.empty()) {
-      const SpMat columns = A.columns(inside);
-      for (Eigen::Index k = 0; k < columns.cols(); k += 3)
-        for (SpMat::InnerIterator it(columns, k); it; ++it) grown[std::size_t(it.row() / 3)] = 1;
-    }
+      if (in[std::size_t(k)])
+        for (SpMat::InnerIterator it(pattern, 3 * k); it; ++it) grown[std::size_t(it.row() / 3)] = 1;
     std::vector<int> out;
     for (Eigen::Index k = 0; k < nb; ++k)
       if (grown[std::size_t(k)]) out.push_back(int(k));

@@ -53,6 +53,7 @@ class StepSystem final : public SystemOperator {
     }
     return m_storage;
   }
+  const SpMat& pattern() override { return m_fem.system_pattern(m_constrained); }
   SpMat columns(const std::vector<int>& dofs) override {
     SpMat out = m_fem.system_columns(m_m, m_k, m_frame, m_constrained, dofs);
     std::vector<int> local(m_constrained.size(), -1);  // index of each DOF in `dofs`, or -1

@@ -35,6 +35,8 @@ class SystemOperator {
   virtual void product(const VecX& x, VecX& y) = 0;
   /// A with both triangles stored, assembled on the first call. The reference stays valid while the operator does.
   virtual const SpMat& matrix() = 0;
+  /// A's sparsity pattern (the values are not to be read): which DOFs A couples, without assembling it.
+  virtual const SpMat& pattern() { return matrix(); }
   /// A's columns of the DOFs `dofs` (ascending; columns 3 i, 3 i + 1, 3 i + 2 are those of dofs[i]), with all their
   /// rows (rows() x 3 |dofs|). By default taken from matrix(); the FEM system computes them from the elements
   /// around the DOFs.

@@ -639,6 +639,7 @@ class PcgSolver final : public LinearSolver {
   // first.
   void analyze_pattern(const SpMat& A) override {
     drop_pending();
+    m_pending_in = -1;
     if (m_use_cholesky) {
       m_front->keep_single(m_single);
       m_front->thorough_ordering(m_opt.thorough_ordering);
@@ -684,6 +685,7 @@ class PcgSolver final : public LinearSolver {
     bool own_factor = false;  // the factor is that of this solve's matrix
     if (m_use_cholesky) {
       if (m_pending && pending_due()) adopt_pending(info);
+      if (m_pending_in >= 0 && m_pending_in-- == 0 && m_bridging && !m_pending) start_pending();
       if (!m_pending && m_rent >= purchase_price()) {
         if (m_opt.factor_lag_solves > 0) {
           start_pending();
@@ -736,15 +738,16 @@ class PcgSolver final : public LinearSolver {
 
  private:
   // The first factorize() of a pattern after a cut, with an inherited factor: the bridge preconditions the solves
-  // until the new pattern's first factor, computed in the background, is due (factor_lag_solves solves later, as a
-  // refresh). Falls back to an inline factorisation when the bridge cannot be built.
+  // until the new pattern's first factor, computed in the background from the next solve's matrix, is due
+  // (factor_lag_solves solves after it started, as a refresh). Falls back to an inline factorisation when the bridge
+  // cannot be built.
   bool start_bridge() {
     if (!m_bridge->build(*m_A)) {
       m_bridge.reset();
       return refactor();
     }
     m_bridging = true;
-    start_pending();
+    m_pending_in = 1;  // the first solve after a cut already builds the bridge: the next one starts the factor
     return true;
   }
 
@@ -752,6 +755,7 @@ class PcgSolver final : public LinearSolver {
   // refresh first: its factor would be older than this one.
   bool refactor() {
     drop_pending();
+    m_pending_in = -1;
     if (!m_front->analyzed()) {
       try {
         m_front->analyze(m_A->matrix());
@@ -972,6 +976,9 @@ class PcgSolver final : public LinearSolver {
   std::unique_ptr<BackgroundFactorization> m_pending;  ///< the background refresh in flight, if any
   std::unique_ptr<CutBridge> m_bridge;        ///< an inherited factor, until this pattern's first one is in place
   bool m_bridging = false;                    ///< the solves are preconditioned through m_bridge
+  /// While bridging: solves until the new pattern's first factor starts in the background (-1: none pending). The
+  /// solve right after a cut builds the bridge, so the factor's assembly and copy wait for the next one.
+  int m_pending_in = -1;
   bool m_single;  ///< the preconditioner solves with a single-precision copy of the factor
   bool m_have_factor = false;
   double m_rent = 0.0;  ///< iteration operations paid since the last factorisation

@@ -8,25 +8,6 @@ namespace octocut::sim {
 
 namespace {
 
-// The rotation Gram-Schmidt makes of M's first two columns (the third their cross product): for the sum of nearby
-// rotations, the rotation they share up to second order in their spread, at a fraction of a polar decomposition's
-// cost. Identity when M's columns are degenerate.
-Mat3 orthonormalized(const Mat3& m) {
-  Vec3 a = m.col(0), b = m.col(1);
-  const double na = a.norm();
-  if (!(na > 0.0)) return Mat3::Identity();
-  a /= na;
-  b -= a.dot(b) * a;
-  const double nb = b.norm();
-  if (!(nb > 1e-12 * na)) return Mat3::Identity();
-  b /= nb;
-  Mat3 r;
-  r.col(0) = a;
-  r.col(1) = b;
-  r.col(2) = a.cross(b);
-  return r;
-}
-
 constexpr int kGrain = 64;  // elements per parallel chunk
 
 // One entry of an element's gather list: corner a of the element feeds DOF `dof` with weight w.
@@ -410,7 +391,7 @@ std::vector<Mat3> FemSystem::dof_rotations(const ElementFrame& frame) const {
         rotations[std::size_t(dm.slot_dof[std::size_t(q)])] +=
             std::abs(dm.slot_weight[std::size_t(q)]) * frame.rotation[std::size_t(e)];
   m_impl->executor_ptr->parallel_for(m.num_dofs(), 1024, [&](int b, int e) {
-    for (int d = b; d < e; ++d) rotations[std::size_t(d)] = orthonormalized(rotations[std::size_t(d)]);
+    for (int d = b; d < e; ++d) rotations[std::size_t(d)] = gram_schmidt_rotation(rotations[std::size_t(d)]);
   });
   return rotations;
 }

@@ -132,6 +132,22 @@ bool newton_polar_rotation(const Mat3& F, Mat3& R) {
 }
 }  // namespace
 
+Mat3 gram_schmidt_rotation(const Mat3& m) {
+  Vec3 a = m.col(0), b = m.col(1);
+  const double na = a.norm();
+  if (!(na > 0.0)) return Mat3::Identity();
+  a /= na;
+  b -= a.dot(b) * a;
+  const double nb = b.norm();
+  if (!(nb > 1e-12 * na)) return Mat3::Identity();
+  b /= nb;
+  Mat3 r;
+  r.col(0) = a;
+  r.col(1) = b;
+  r.col(2) = a.cross(b);
+  return r;
+}
+
 Mat3 polar_rotation(const Mat3& F) {
   Mat3 R;
   if (newton_polar_rotation(F, R)) return R;

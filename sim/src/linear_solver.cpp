@@ -4,6 +4,7 @@
 
 #include <chrono>
 
+#include "octocut/sim/hex_element.hpp"
 #include "octocut/sim/parallel.hpp"
 #include "supernodal_solve.hpp"
 
@@ -422,6 +423,31 @@ class CholmodSolver final : public LinearSolver {
   bool m_ok = false;
 };
 
+// w = Q^T r per DOF (3 x 3 blocks Q_d; see PcgSolver's warp).
+void warp_transpose(const std::vector<Mat3>& q, const VecX& r, VecX& w) {
+  w.resize(r.size());
+  for (std::size_t d = 0; d < q.size(); ++d)
+    w.segment<3>(3 * Eigen::Index(d)).noalias() = q[d].transpose() * r.segment<3>(3 * Eigen::Index(d));
+}
+// The rotations of the old factor's matrix in the new numbering (T: new x old DOFs): each new DOF's old DOFs'
+// rotations summed with |weights| and made a rotation again (a copied DOF keeps its own). Empty when `old` does not
+// match T.
+std::vector<Mat3> transferred_rotations(const std::vector<Mat3>& old, const SpMat& transfer) {
+  if (old.empty() || Eigen::Index(old.size()) != transfer.cols()) return {};
+  std::vector<Mat3> out(std::size_t(transfer.rows()), Mat3::Zero());
+  for (Eigen::Index j = 0; j < transfer.cols(); ++j)
+    for (SpMat::InnerIterator it(transfer, j); it; ++it) out[std::size_t(it.row())] += std::abs(it.value()) * old[std::size_t(j)];
+  for (Mat3& r : out) r = gram_schmidt_rotation(r);
+  return out;
+}
+// z = Q z in place per DOF.
+void warp_in_place(const std::vector<Mat3>& q, VecX& z) {
+  for (std::size_t d = 0; d < q.size(); ++d) {
+    const Vec3 zd = z.segment<3>(3 * Eigen::Index(d));
+    z.segment<3>(3 * Eigen::Index(d)).noalias() = q[d] * zd;
+  }
+}
+
 // An exact solve on a region C of the DOFs, combined with a global preconditioner G multiplicatively and
 // symmetrically (local, global, local: symmetric multiplicative Schwarz), with L = E_C A_CC^-1 E_C^T:
 //   z1 = L r,  z2 = z1 + G (r - A z1),  z = z2 + L (r - A z2).
@@ -544,12 +570,22 @@ class CutBridge {
     return m_local.build(A, cut_region(A));  // false without its factor: G alone would miss the cut's new DOFs
   }
   /// z = the bridge applied to r for the system matrix it was built for (see the class comment); F_old's
-  /// triangular solves in single precision if asked, on the executor's threads.
-  void apply(const VecX& r, VecX& z, bool single, Executor* executor) {
+  /// triangular solves in single precision if asked, on the executor's threads; G warped by `warp` (Q G Q^T, new
+  /// numbering) unless it is empty.
+  void apply(const VecX& r, VecX& z, bool single, Executor* executor, const std::vector<Mat3>& warp) {
+    const auto global = [&](const VecX& rr, VecX& w) {
+      if (warp.empty()) {
+        apply_global(rr, w, single, executor);
+        return;
+      }
+      warp_transpose(warp, rr, m_warped);
+      apply_global(m_warped, w, single, executor);
+      warp_in_place(warp, w);
+    };
     if (m_local.empty())
-      apply_global(r, z, single, executor);
+      global(r, z);
     else
-      m_local.apply(r, z, [&](const VecX& rr, VecX& w) { apply_global(rr, w, single, executor); });
+      m_local.apply(r, z, global);
   }
 
  private:
@@ -598,6 +634,7 @@ class CutBridge {
   SpMat m_transfer;                         ///< new x old DOFs (transfer_matrix)
   LocalSolve m_local;                       ///< the exact solve on the cut's region (at the bridge's first matrix)
   VecX m_rc, m_zc;                          ///< work: T^T r, F_old^-1 T^T r (3 old num_dofs)
+  VecX m_warped;                            ///< work: Q^T r (3 num_dofs)
 };
 
 // Conjugate gradients, warm-started from x, with either a lagged Cholesky factor of an earlier system matrix or
@@ -675,6 +712,7 @@ class PcgSolver final : public LinearSolver {
         !old->m_have_factor || transfer.cols() * 3 != Eigen::Index(old->m_front->size()))
       return;
     old->drop_pending();
+    m_rotations_front = transferred_rotations(old->m_rotations_front, transfer);
     m_bridge = std::make_unique<CutBridge>(std::move(old->m_front), transfer);
     old->m_front = std::make_unique<CholmodFactor>();
     old->m_have_factor = false;
@@ -865,25 +903,17 @@ class PcgSolver final : public LinearSolver {
   // memory: an unpreconditioned step).
   void apply_factor(const VecX& r, VecX& z) {
     if (m_bridging) {
-      m_bridge->apply(r, z, m_single, m_executor);
+      m_bridge->apply(r, z, m_single, m_executor, m_warp);
       return;
     }
     const bool warped = !m_warp.empty();
-    if (warped) {  // z = Q F^-1 Q^T r (see set_dof_rotations)
-      m_warped.resize(r.size());
-      for (std::size_t d = 0; d < m_warp.size(); ++d)
-        m_warped.segment<3>(3 * Eigen::Index(d)).noalias() = m_warp[d].transpose() * r.segment<3>(3 * Eigen::Index(d));
-    }
+    if (warped) warp_transpose(m_warp, r, m_warped);  // z = Q F^-1 Q^T r (see set_dof_rotations)
     const VecX& rhs = warped ? m_warped : r;
     if (!(m_single ? m_front->solve_single(rhs, z, m_executor) : m_front->solve(rhs, z))) {
       z = r;
       return;
     }
-    if (warped)
-      for (std::size_t d = 0; d < m_warp.size(); ++d) {
-        const Vec3 zd = z.segment<3>(3 * Eigen::Index(d));
-        z.segment<3>(3 * Eigen::Index(d)).noalias() = m_warp[d] * zd;
-      }
+    if (warped) warp_in_place(m_warp, z);
   }
   // The warp of the front factor for the solve about to run: Q_d = R_d R_d,factor^T for every DOF, or none (while
   // bridging, without rotations for both matrices, or while no DOF has turned by kWarpAngle since the factor's
@@ -893,7 +923,7 @@ class PcgSolver final : public LinearSolver {
   // iterations per step at tolerance 1e-6).
   void prepare_warp() {
     m_warp.clear();
-    if (!m_use_cholesky || m_bridging || !m_have_factor || m_rotations_now.empty() ||
+    if (!m_use_cholesky || !(m_have_factor || m_bridging) || m_rotations_now.empty() ||
         m_rotations_now.size() != m_rotations_front.size() || 3 * Eigen::Index(m_rotations_now.size()) != m_A->rows())
       return;
     constexpr double kWarpAngle = 0.01;  // rad: element matrices change by about 1 % when turned so far

@@ -451,6 +451,64 @@ TEST(LinearSolver, PcgWarpsTheLaggedFactorByTheDofsRotations) {
   EXPECT_EQ(solution[0], solution[1]);
 }
 
+// After a cut the solves are bridged through the old revision's factor (inherit), and that factor is warped too: its
+// matrix's rotations are carried into the new numbering by the transfer T. Here T is the identity (a "cut" that
+// changed nothing) and the body has turned rigidly by 0.6 rad since the old factor's matrix: the bridged solve of the
+// turned system Q A Q^T takes one iteration with the DOFs' rotations and at least ten without, both to the tolerance
+// by the residual recomputed here.
+TEST(LinearSolver, PcgWarpsTheCutBridgeByTheTransferredRotations) {
+  const ObjectModel m = test::box_model({Vec3(0, 0, 0), Vec3(1, 1, 1)}, Vec3(0, 0, 0), 1.0, 3,
+                                        {{Box3{Vec3(0.2, 0.2, 0.2), Vec3(0.7, 0.7, 0.7)}, 4}});
+  const int nd = m.num_dofs();
+  const std::vector<char> free_dofs(static_cast<std::size_t>(nd), 0);
+  Executor ex(1);
+  FemSystem fem(m, ex);
+  const auto system = [&](const std::vector<Vec3>& x) {
+    ElementFrame frame;
+    fem.rotations(x, frame);
+    SpMat A;
+    VecX coupling;
+    fem.assemble_system(1.0, 1e-2, frame, free_dofs, VecX::Zero(3 * nd), A, coupling);
+    return A;
+  };
+  const std::vector<Vec3>& rest = m.dofs().dof_rest;
+  const Mat3 Q = Mat3(Eigen::AngleAxisd(0.6, Vec3(1, 2, 3).normalized()));
+  std::vector<Vec3> turned(rest.size());
+  for (std::size_t d = 0; d < rest.size(); ++d) turned[d] = Q * rest[d];
+  const SpMat A0 = system(rest), A1 = system(turned);
+  SpMat T(nd, nd);
+  T.setIdentity();
+  const VecX b = VecX::LinSpaced(A0.rows(), -1.0, 2.0);
+  for (const bool rotations : {true, false}) {
+    LinearSolverOptions o;
+    o.tolerance = 1e-10;
+    o.max_iterations = 1000;
+    o.factor_lag_solves = 4;
+    o.factor_flop_advantage = 1e-6;     // no refresh on account of the iterations
+    o.single_precision_factor = false;  // one iteration where the warp is exact
+    auto old_solver = make_linear_solver("pcg", o);
+    old_solver->analyze_pattern(A0);
+    old_solver->set_dof_rotations(std::vector<Mat3>(std::size_t(nd), Mat3::Identity()));
+    ASSERT_TRUE(old_solver->factorize(A0));
+    VecX x0 = VecX::Zero(A0.rows());
+    ASSERT_TRUE(old_solver->solve(b, x0).ok);
+    auto s = make_linear_solver("pcg", o);
+    s->analyze_pattern(A1);
+    s->inherit(*old_solver, T);
+    s->set_dof_rotations(rotations ? std::vector<Mat3>(std::size_t(nd), Q) : std::vector<Mat3>{});
+    ASSERT_TRUE(s->factorize(A1));
+    VecX x1 = VecX::Zero(A1.rows());
+    const SolveInfo info = s->solve(b, x1);
+    ASSERT_TRUE(info.ok);
+    EXPECT_FALSE(info.refactorized);  // the bridge, not a factor of A1
+    EXPECT_LE((b - A1 * x1).norm(), 1.01e-10 * b.norm());
+    if (rotations)
+      EXPECT_LE(info.iterations, 1);
+    else
+      EXPECT_GE(info.iterations, 10);
+  }
+}
+
 TEST(LinearSolver, IndefiniteMatrixIsReportedNotCrashing) {
   SpMat A = laplacian(4, 0.0);
   A.coeffRef(0, 0) = -5.0;

@@ -38,6 +38,11 @@ Mat3 hex_center_gradient(const Eigen::Matrix<double, 3, 8>& x, double h);
 /// 2004 (flip the direction of the smallest singular value).
 Mat3 polar_rotation(const Mat3& F);
 
+/// The rotation Gram-Schmidt makes of M's first two columns (the third their cross product): for a weighted sum of
+/// nearby rotations, the rotation they share up to second order in their spread, at a fraction of a polar
+/// decomposition's cost. Identity when M's columns are degenerate.
+Mat3 gram_schmidt_rotation(const Mat3& m);
+
 /// Corotated displacement R^T (x - x_c) - (X - X_c) of the 8 corners relative to their centroids (m, 24).
 Vec24 corotated_displacement(const Mat3& R, const Vec24& x, const Vec24& X);
 

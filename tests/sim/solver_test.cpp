@@ -356,6 +356,24 @@ TEST(LinearSolver, PcgSolvesFastDofsExactlyBesideTheLaggedFactor) {
   EXPECT_LT(2 * work[1], work[0]) << "told " << work[1] << ", not told " << work[0];
 }
 
+// The free mixed-level box of the warp tests (hanging nodes around a refined block), and its implicit system at the
+// DOF positions x (num_dofs): both triangles, no DOF constrained.
+struct FreeBox {
+  ObjectModel m = test::box_model({Vec3(0, 0, 0), Vec3(1, 1, 1)}, Vec3(0, 0, 0), 1.0, 3,
+                                  {{Box3{Vec3(0.2, 0.2, 0.2), Vec3(0.7, 0.7, 0.7)}, 4}});
+  Executor ex{1};
+  FemSystem fem{m, ex};
+  [[nodiscard]] int nd() const { return m.num_dofs(); }
+  [[nodiscard]] SpMat system(const std::vector<Vec3>& x) {
+    ElementFrame frame;
+    fem.rotations(x, frame);
+    SpMat A;
+    VecX coupling;
+    fem.assemble_system(1.0, 1e-2, frame, std::vector<char>(std::size_t(nd()), 0), VecX::Zero(3 * nd()), A, coupling);
+    return A;
+  }
+};
+
 // The lagged factor warped by the DOFs' rotations (set_dof_rotations). The corotated system of a free body turned
 // rigidly by Q is Q A Q^T (checked against the assembly here), whose inverse is Q A^-1 Q^T: the warped factor of the
 // body at rest, with the DOFs' rotations FemSystem::dof_rotations gives (Q for every DOF, checked), then solves the
@@ -364,24 +382,14 @@ TEST(LinearSolver, PcgSolvesFastDofsExactlyBesideTheLaggedFactor) {
 // and the warp is no longer exact, but it still saves more than half of the iterations. Turns below 0.01 rad leave
 // the factor unwarped. The residual is recomputed each time.
 TEST(LinearSolver, PcgWarpsTheLaggedFactorByTheDofsRotations) {
-  const ObjectModel m = test::box_model({Vec3(0, 0, 0), Vec3(1, 1, 1)}, Vec3(0, 0, 0), 1.0, 3,
-                                        {{Box3{Vec3(0.2, 0.2, 0.2), Vec3(0.7, 0.7, 0.7)}, 4}});
-  const int nd = m.num_dofs();
-  const std::vector<char> free_dofs(static_cast<std::size_t>(nd), 0);
-  Executor ex(1);
-  FemSystem fem(m, ex);
-  const auto system = [&](const std::vector<Vec3>& x) {
-    ElementFrame frame;
-    fem.rotations(x, frame);
-    SpMat A;
-    VecX coupling;
-    fem.assemble_system(1.0, 1e-2, frame, free_dofs, VecX::Zero(3 * nd), A, coupling);
-    return A;
-  };
+  FreeBox box;
+  const ObjectModel& m = box.m;
+  const int nd = box.nd();
+  const auto system = [&](const std::vector<Vec3>& x) { return box.system(x); };
   const auto dof_rotations = [&](const std::vector<Vec3>& x) {
     ElementFrame frame;
-    fem.rotations(x, frame);
-    return fem.dof_rotations(frame);
+    box.fem.rotations(x, frame);
+    return box.fem.dof_rotations(frame);
   };
   const std::vector<Vec3>& rest = m.dofs().dof_rest;
   const SpMat A0 = system(rest);
@@ -457,25 +465,13 @@ TEST(LinearSolver, PcgWarpsTheLaggedFactorByTheDofsRotations) {
 // turned system Q A Q^T takes one iteration with the DOFs' rotations and at least ten without, both to the tolerance
 // by the residual recomputed here.
 TEST(LinearSolver, PcgWarpsTheCutBridgeByTheTransferredRotations) {
-  const ObjectModel m = test::box_model({Vec3(0, 0, 0), Vec3(1, 1, 1)}, Vec3(0, 0, 0), 1.0, 3,
-                                        {{Box3{Vec3(0.2, 0.2, 0.2), Vec3(0.7, 0.7, 0.7)}, 4}});
-  const int nd = m.num_dofs();
-  const std::vector<char> free_dofs(static_cast<std::size_t>(nd), 0);
-  Executor ex(1);
-  FemSystem fem(m, ex);
-  const auto system = [&](const std::vector<Vec3>& x) {
-    ElementFrame frame;
-    fem.rotations(x, frame);
-    SpMat A;
-    VecX coupling;
-    fem.assemble_system(1.0, 1e-2, frame, free_dofs, VecX::Zero(3 * nd), A, coupling);
-    return A;
-  };
-  const std::vector<Vec3>& rest = m.dofs().dof_rest;
+  FreeBox box;
+  const int nd = box.nd();
+  const std::vector<Vec3>& rest = box.m.dofs().dof_rest;
   const Mat3 Q = Mat3(Eigen::AngleAxisd(0.6, Vec3(1, 2, 3).normalized()));
   std::vector<Vec3> turned(rest.size());
   for (std::size_t d = 0; d < rest.size(); ++d) turned[d] = Q * rest[d];
-  const SpMat A0 = system(rest), A1 = system(turned);
+  const SpMat A0 = box.system(rest), A1 = box.system(turned);
   SpMat T(nd, nd);
   T.setIdentity();
   const VecX b = VecX::LinSpaced(A0.rows(), -1.0, 2.0);

@@ -213,9 +213,13 @@ struct FemSystem::Impl {
     for (const GatherEntry& g : gather[std::size_t(e)])
       if (bool(constrained[std::size_t(g.dof)]) == want_constrained)
         local.segment<3>(3 * g.corner) += g.w * x.segment<3>(3 * g.dof);
-    const Mat3& R = frame.rotation[std::size_t(e)];
-    for (int a = 0; a < 8; ++a) local.segment<3>(3 * a) = R.transpose() * local.segment<3>(3 * a);
-    const Vec24 kl = (kc * model().stiffness_scale()[std::size_t(e)]) * (model().unit_stiffness() * local);
+    return rotated_apply(e, kc, frame.rotation[std::size_t(e)], local);
+  }
+
+  // kc R K R^T v for element e's slot vector v (24), applied block-wise without forming R K R^T.
+  Vec24 rotated_apply(int e, double kc, const Mat3& R, Vec24 v) const {
+    for (int a = 0; a < 8; ++a) v.segment<3>(3 * a) = R.transpose() * v.segment<3>(3 * a);
+    const Vec24 kl = (kc * model().stiffness_scale()[std::size_t(e)]) * (model().unit_stiffness() * v);
     Vec24 out;
     for (int a = 0; a < 8; ++a) out.segment<3>(3 * a) = R * kl.segment<3>(3 * a);
     return out;
@@ -430,14 +434,7 @@ void FemSystem::force_and_product(const std::vector<Vec3>& x, const ElementFrame
       const Mat3& R = frame.rotation[std::size_t(e)];
       const double s = m.stiffness_scale()[std::size_t(e)];  // K = s K_unit
       fe[std::size_t(e)] = s * corotated_force(m.unit_stiffness(), R, xe, m_impl->rest[std::size_t(e)]);
-      if (want_kv) {
-        // K_rot v = R K R^T v, applied block-wise without forming K_rot.
-        const Vec24 ve = m_impl->element_vector(e, v);
-        Vec24 local;
-        for (int a = 0; a < 8; ++a) local.segment<3>(3 * a) = R.transpose() * ve.segment<3>(3 * a);
-        const Vec24 kl = s * (m.unit_stiffness() * local);
-        for (int a = 0; a < 8; ++a) kve[std::size_t(e)].segment<3>(3 * a) = R * kl.segment<3>(3 * a);
-      }
+      if (want_kv) kve[std::size_t(e)] = m_impl->rotated_apply(e, 1.0, R, m_impl->element_vector(e, v));
     }
   });
   m_impl->gather_vectors(fe, f);
@@ -634,9 +631,10 @@ SpMat FemSystem::system_columns(double mc, double kc, const ElementFrame& frame,
   for (std::size_t i = 0; i < dofs.size(); ++i) {
     const int q = dofs[i];
     const double diag = constrained[std::size_t(q)] ? 1.0 : mc * m.dof_mass()[std::size_t(q)];
-    for (int c = 0; c < 3; ++c)
-      val[o_outer[3 * i + std::size_t(c)] + (im.diag_offsets[3 * std::size_t(q) + std::size_t(c)] - outer[3 * q + c])] +=
-          diag;
+    for (int c = 0; c < 3; ++c) {
+      const int diag_in_column = im.diag_offsets[3 * std::size_t(q) + std::size_t(c)] - outer[3 * q + c];
+      val[o_outer[3 * i + std::size_t(c)] + diag_in_column] += diag;
+    }
   }
   return out;
 }

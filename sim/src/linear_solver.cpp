@@ -436,7 +436,8 @@ std::vector<Mat3> transferred_rotations(const std::vector<Mat3>& old, const SpMa
   if (old.empty() || Eigen::Index(old.size()) != transfer.cols()) return {};
   std::vector<Mat3> out(std::size_t(transfer.rows()), Mat3::Zero());
   for (Eigen::Index j = 0; j < transfer.cols(); ++j)
-    for (SpMat::InnerIterator it(transfer, j); it; ++it) out[std::size_t(it.row())] += std::abs(it.value()) * old[std::size_t(j)];
+    for (SpMat::InnerIterator it(transfer, j); it; ++it)
+      out[std::size_t(it.row())] += std::abs(it.value()) * old[std::size_t(j)];
   for (Mat3& r : out) r = gram_schmidt_rotation(r);
   return out;
 }
@@ -915,8 +916,9 @@ class PcgSolver final : public LinearSolver {
     }
     if (warped) warp_in_place(m_warp, z);
   }
-  // The warp of the front factor for the solve about to run: Q_d = R_d R_d,factor^T for every DOF, or none (while
-  // bridging, without rotations for both matrices, or while no DOF has turned by kWarpAngle since the factor's
+  // The warp of the front factor (or, while bridging, of the bridge's old factor, its rotations carried through T by
+  // inherit) for the solve about to run: Q_d = R_d R_d,factor^T for every DOF, or none (without a factor, without
+  // rotations for both matrices, or while no DOF has turned by kWarpAngle since the factor's
   // matrix: then the rotations are no larger than their spread across each element, which the warp cannot follow
   // (Q differs between the corners of an element, so the warped element matrices no longer leave translations
   // free), and the unwarped factor does better: a clamped cube sagging under its weight, 1.36 against 2.09

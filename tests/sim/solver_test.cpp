@@ -385,14 +385,13 @@ TEST(LinearSolver, PcgWarpsTheLaggedFactorByTheDofsRotations) {
   FreeBox box;
   const ObjectModel& m = box.m;
   const int nd = box.nd();
-  const auto system = [&](const std::vector<Vec3>& x) { return box.system(x); };
   const auto dof_rotations = [&](const std::vector<Vec3>& x) {
     ElementFrame frame;
     box.fem.rotations(x, frame);
     return box.fem.dof_rotations(frame);
   };
   const std::vector<Vec3>& rest = m.dofs().dof_rest;
-  const SpMat A0 = system(rest);
+  const SpMat A0 = box.system(rest);
   const VecX b = VecX::LinSpaced(A0.rows(), -1.0, 2.0);
   // Factorises A0 (the DOFs' rotations identity, or none when `turn` is empty), then solves A1 with that lagged
   // factor, the DOFs' rotations `turn`; the residual recomputed.
@@ -424,7 +423,7 @@ TEST(LinearSolver, PcgWarpsTheLaggedFactorByTheDofsRotations) {
       const double a = 0.5 * rest[std::size_t(d)].z();
       x[std::size_t(d)] = (twist ? Mat3(Eigen::AngleAxisd(a, Vec3::UnitZ())) : Q) * rest[std::size_t(d)];
     }
-    const SpMat A1 = system(x);
+    const SpMat A1 = box.system(x);
     // The DOFs' rotations as the simulator gives them: from the elements' corotational frames.
     const std::vector<Mat3> turn = dof_rotations(x);
     if (!twist) {
@@ -452,7 +451,7 @@ TEST(LinearSolver, PcgWarpsTheLaggedFactorByTheDofsRotations) {
   const Mat3 small = Mat3(Eigen::AngleAxisd(0.005, Vec3(1, 2, 3).normalized()));
   std::vector<Vec3> xs(static_cast<std::size_t>(nd));
   for (int d = 0; d < nd; ++d) xs[std::size_t(d)] = small * rest[std::size_t(d)];
-  const SpMat As = system(xs);
+  const SpMat As = box.system(xs);
   VecX solution[2];
   solve_lagged(As, {}, solution[0]);
   solve_lagged(As, std::vector<Mat3>(std::size_t(nd), small), solution[1]);

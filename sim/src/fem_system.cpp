@@ -419,13 +419,14 @@ void FemSystem::rotations(const std::vector<Vec3>& x, ElementFrame& frame) const
 }
 
 void FemSystem::force_and_product(const std::vector<Vec3>& x, const ElementFrame& frame, const VecX& v, VecX& f,
-                                  VecX& kv) const {
+                                  VecX& kv, double* energy) const {
   const ObjectModel& m = m_impl->model();
   const int ne = m.num_elements();
   std::vector<Vec3> slots;
   prolong(x, slots);
   const bool want_kv = v.size() == 3 * m.num_dofs();
   std::vector<Vec24> fe(static_cast<std::size_t>(ne)), kve(want_kv ? std::size_t(ne) : 0);
+  std::vector<double> ee(energy != nullptr ? std::size_t(ne) : 0);  // J per element, summed in order below
   m_impl->executor_ptr->parallel_for(ne, kGrain, [&](int b, int en) {
     Vec24 xe;
     Eigen::Matrix<double, 3, 8> xm;
@@ -433,12 +434,18 @@ void FemSystem::force_and_product(const std::vector<Vec3>& x, const ElementFrame
       element_slots(slots, e, xe, xm);
       const Mat3& R = frame.rotation[std::size_t(e)];
       const double s = m.stiffness_scale()[std::size_t(e)];  // K = s K_unit
-      fe[std::size_t(e)] = s * corotated_force(m.unit_stiffness(), R, xe, m_impl->rest[std::size_t(e)]);
+      double* eu = energy != nullptr ? &ee[std::size_t(e)] : nullptr;  // u^T K_unit u / 2, scaled by s below
+      fe[std::size_t(e)] = s * corotated_force(m.unit_stiffness(), R, xe, m_impl->rest[std::size_t(e)], eu);
+      if (eu != nullptr) *eu *= s;
       if (want_kv) kve[std::size_t(e)] = m_impl->rotated_apply(e, 1.0, R, m_impl->element_vector(e, v));
     }
   });
   m_impl->gather_vectors(fe, f);
   if (want_kv) m_impl->gather_vectors(kve, kv);
+  if (energy != nullptr) {
+    *energy = 0.0;
+    for (const double e : ee) *energy += e;
+  }
 }
 
 void FemSystem::elastic_force(const std::vector<Vec3>& x, const ElementFrame& frame, VecX& f) const {

@@ -1,5 +1,6 @@
 #include "octocut/sim/simulator.hpp"
 
+#include <cstdlib>
 #include <algorithm>
 #include <cmath>
 #include <functional>
@@ -83,12 +84,20 @@ double lap(Clock::time_point& t0) {
 }
 }  // namespace
 
+// The state a step starts from as the energy guard left it (energy_holds): valid while m_state_version == version.
+struct Simulator::StepStart {
+  std::uint64_t version = 0;
+  ElementFrame frame;  ///< the elements' rotations at x
+  VecX f_el, kv;       ///< elastic force at x and K v (3 num_dofs)
+};
+
 Simulator::Simulator(ObjectModel model, const SimulatorOptions& options)
     : m_model(std::move(model)), m_options(options) {
   if (!(options.dt > 0.0)) throw std::invalid_argument("Simulator: dt must be positive");
   m_executor = std::make_unique<Executor>(options.threads);
   m_solver = make_solver();
   m_state = SimState::rest(m_model);
+  ++m_state_version;
   rebuild();
 }
 
@@ -107,6 +116,7 @@ void Simulator::set_model(ObjectModel model) {
   SimState s = transfer_state(m_model, m_state, model);
   m_model = std::move(model);
   m_state = std::move(s);
+  ++m_state_version;
   rebuild();
 }
 
@@ -182,6 +192,7 @@ void Simulator::adopt(PreparedModel prepared) {
   // Nothing below throws (moves), so the simulator is either unchanged or fully switched.
   m_model = std::move(*p.model);
   m_state = std::move(p.state);
+  ++m_state_version;
   m_fem = std::move(p.fem);
   m_fem->rebind(m_model, *m_executor);
   m_constrained = std::move(p.constrained);
@@ -197,6 +208,7 @@ void Simulator::set_state(SimState state) {
   if (int(state.x.size()) != m_model.num_dofs() || state.v.size() != state.x.size())
     throw std::invalid_argument("Simulator::set_state: state does not match the model");
   m_state = std::move(state);
+  ++m_state_version;
   m_history = 0;  // the increments no longer lead up to this state
 }
 
@@ -205,6 +217,7 @@ void Simulator::remove_object() {
   SimState none;  // no DOFs
   none.t = m_state.t;
   m_state = std::move(none);
+  ++m_state_version;
   m_solver = make_solver();
   rebuild();
 }
@@ -238,12 +251,22 @@ bool Simulator::solve_increment(double dt, const VecX& dv_c, VecX& dv) {
 
   // Forces at x: elastic, K v, gravity.
   auto t0 = Clock::now();
+  // The rotations and forces at x: those the energy guard computed at the end of the last step when the state is the
+  // one it ended with (try_dynamic_step), else computed now.
   ElementFrame frame;
-  m_fem->rotations(m_state.x, frame);
+  VecX f_el, kv;
+  const bool ready = m_next_start && m_next_start->version == m_state_version;
+  if (ready) {
+    frame = std::move(m_next_start->frame);
+    f_el = std::move(m_next_start->f_el);
+    kv = std::move(m_next_start->kv);
+  } else {
+    m_fem->rotations(m_state.x, frame);
+  }
+  m_next_start.reset();
   for (const double r : frame.volume_ratio) m_stats.min_volume_ratio = std::min(m_stats.min_volume_ratio, r);
   m_profile.rotations = lap(t0);
-  VecX f_el, kv;
-  m_fem->force_and_product(m_state.x, frame, v, f_el, kv);
+  if (!ready) m_fem->force_and_product(m_state.x, frame, v, f_el, kv);
   m_profile.forces = lap(t0);
 
   // (M + dt C + dt^2 K) dv = dt (f_ext + f_el - C v - dt K v), with C = alpha M + beta K.
@@ -312,6 +335,7 @@ bool Simulator::commit_step(double dt, const VecX& dv, const std::vector<Vec3>& 
   m_state.x = std::move(xn);
   m_state.v = std::move(vn);
   m_state.t += dt;
+  ++m_state_version;
   m_history = m_history > 0 && m_history_dt == dt ? std::min(m_history + 1, 3) : 1;
   m_history_dt = dt;
   std::swap(m_dv_prev3, m_dv_prev2);
@@ -345,27 +369,74 @@ void Simulator::warm_start(double dt, VecX& dv) const {
     dv = m_dv_prev;
 }
 
-bool Simulator::try_dynamic_step(double dt) {
+// Whether the energy guard checks an attempt with handle targets `target`: not when a handle moves (its work is not
+// measured), not at the smallest dt (may_reject false), and only when the start's energy is at hand (kept from the step
+// that ended there, or from the attempt rolled back to it): the first step after a cut, a reset or a new state is not
+// checked.
+bool Simulator::energy_guarded(bool may_reject, const std::vector<Vec3>& target) const {
+  if (!(m_options.energy_guard > 0.0) || !may_reject || m_energy_version != m_state_version) return false;
+  for (int d = 0; d < m_model.num_dofs(); ++d)
+    if (m_constrained[std::size_t(d)] && target[std::size_t(d)] != m_state.x[std::size_t(d)]) return false;
+  return true;
+}
+
+bool Simulator::try_dynamic_step(double dt, bool may_reject) {
   std::vector<Vec3> target;  // handle DOFs' positions at t + dt (num_dofs)
   const VecX dv_c = prescribed_increments(dt, target);
   VecX dv;
   const std::vector<Vec3> v0 = m_contacts.empty() ? std::vector<Vec3>() : m_state.v;
+  const bool guard = energy_guarded(may_reject, target);
+  const double e0 = m_energy;                                             // J, kinetic + elastic at the start
+  const std::vector<Vec3> x0 = guard ? m_state.x : std::vector<Vec3>();  // for the work gravity does
   if (!solve_increment(dt, dv_c, dv) || !commit_step(dt, dv, target)) return false;
+  double work = 0.0, penalty = 0.0;  // J: the rigid shapes' work through the contacts, the penalty springs' change
   if (!m_contacts.empty()) {
-    // The forces of this (part of the) step, and where the next part starts from.
-    const auto t0 = Clock::now();
     m_outcomes = sim::contact_outcomes(m_contacts, dt, v0, dv);
     for (std::size_t i = 0; i < m_contacts.size(); ++i) {
       // The normal force is k (d_end - d_start + max(d_start, 0)) (contact.cpp): its potential is k d~^2 / 2 with
       // d~ = d - d_start + max(d_start, 0).
       const Contact& c = m_contacts[i];
       const double d0 = std::max(c.penetration, 0.0), d1 = m_outcomes[i].penetration - c.penetration + d0;
-      m_contact_energy.work_j += dt * m_outcomes[i].force.dot(c.rigid_velocity);
-      m_contact_energy.penalty_change_j += 0.5 * c.stiffness * (d1 * d1 - d0 * d0);
-      m_contacts[i].penetration = m_outcomes[i].penetration;
+      work += dt * m_outcomes[i].force.dot(c.rigid_velocity);
+      penalty += 0.5 * c.stiffness * (d1 * d1 - d0 * d0);
     }
-    m_profile.contact += ms_since(t0);
   }
+  if (m_options.energy_guard > 0.0 && !energy_holds(guard, e0, x0, work, penalty)) {
+    ++m_stats.energy_rejections;
+    return false;
+  }
+  if (!m_contacts.empty()) {
+    // The forces of this (part of the) step, and where the next part starts from.
+    m_contact_energy.work_j += work;
+    m_contact_energy.penalty_change_j += penalty;
+    for (std::size_t i = 0; i < m_contacts.size(); ++i) m_contacts[i].penetration = m_outcomes[i].penetration;
+  }
+  return true;
+}
+
+// The energy guard at the state just committed: the kinetic + elastic energy e1 may exceed the start's e0 (J) by no
+// more than the work of gravity (from the start's positions x0) and of the rigid shapes, less what the penalty springs
+// took up, plus energy_guard times the largest of these terms (checked only when `check`). The rotations, forces and
+// K v it computes at the new state are the next step's start (solve_increment), so the guard costs the elastic
+// energy's few operations per element, not another pass.
+bool Simulator::energy_holds(bool check, double e0, const std::vector<Vec3>& x0, double work, double penalty) {
+  auto next = std::make_unique<StepStart>();
+  m_fem->rotations(m_state.x, next->frame);
+  double elastic = 0.0;
+  m_fem->force_and_product(m_state.x, next->frame, flatten(m_state.v), next->f_el, next->kv, &elastic);
+  const double e1 = kinetic_energy() + elastic;
+  if (check) {
+    double gravity_work = 0.0;
+    for (int d = 0; d < m_model.num_dofs(); ++d)
+      gravity_work +=
+          m_model.dof_mass()[std::size_t(d)] * m_options.gravity.dot(m_state.x[std::size_t(d)] - x0[std::size_t(d)]);
+    const double scale = std::max({e0, e1, std::abs(work), std::abs(gravity_work), std::abs(penalty)});
+    if (e1 + penalty - e0 - work - gravity_work > m_options.energy_guard * scale) return false;
+  }
+  next->version = m_state_version;
+  m_next_start = std::move(next);
+  m_energy = e1;
+  m_energy_version = m_state_version;
   return true;
 }
 
@@ -373,6 +444,7 @@ void Simulator::reset_failed_step(const SimState& start) {
   // Positions of the step's start, velocities zero, handles at their pose at t + dt.
   ++m_stats.failed_steps;
   m_state = start;
+  ++m_state_version;
   m_state.t = start.t + m_options.dt;
   for (int d = 0; d < m_model.num_dofs(); ++d) {
     m_state.v[std::size_t(d)].setZero();
@@ -386,6 +458,7 @@ void Simulator::step() {
   m_contact_energy = {};
   if (empty()) {
     m_state.t += dt;  // nothing to simulate; time still runs
+    ++m_state_version;
     m_contacts.clear();
     return;
   }
@@ -398,20 +471,22 @@ void Simulator::step() {
   // down to dt / 2^max_halvings.
   std::function<bool(double, int)> advance = [&](double h, int depth) {
     const SimState before = m_state;
+    const std::uint64_t version_before = m_state_version;
     const ContactEnergy energy_before = m_contact_energy;
-    if (try_dynamic_step(h)) return true;
+    if (try_dynamic_step(h, depth < m_options.max_halvings)) return true;
     m_state = before;
+    m_state_version = version_before;  // the same state: what was computed from it (m_energy) holds again
     m_contact_energy = energy_before;
     m_dv_prev.setZero();
     m_history = 0;
     if (depth >= m_options.max_halvings) return false;
     return advance(0.5 * h, depth + 1) && advance(0.5 * h, depth + 1);
   };
-  const int failures_before = m_stats.nonfinite + m_stats.speed_limit + m_stats.solver_failures;
+  const int failures_before = m_stats.nonfinite + m_stats.speed_limit + m_stats.solver_failures + m_stats.energy_rejections;
   const bool ok = advance(dt, 0);
   m_contacts.clear();  // found anew by the caller for the next step
   if (ok) {
-    if (m_stats.nonfinite + m_stats.speed_limit + m_stats.solver_failures > failures_before) ++m_stats.recoveries;
+    if (m_stats.nonfinite + m_stats.speed_limit + m_stats.solver_failures + m_stats.energy_rejections > failures_before) ++m_stats.recoveries;
     return;
   }
   m_outcomes.clear();
@@ -472,6 +547,7 @@ double Simulator::line_search(std::vector<Vec3>& x, const VecX& dx, const VecX& 
 bool Simulator::solve_static(double t) {
   if (empty()) {
     m_state.t = t;
+    ++m_state_version;
     return true;
   }
   const ObjectModel& m = m_model;
@@ -514,6 +590,7 @@ bool Simulator::solve_static(double t) {
     for (const double ratio : frame.volume_ratio) m_stats.min_volume_ratio = std::min(m_stats.min_volume_ratio, ratio);
   }
   m_state.t = t;
+  ++m_state_version;
   return converged;
 }
 

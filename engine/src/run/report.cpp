@@ -108,6 +108,7 @@ std::string report_json(const Report& r) {
                     {"solver_failures", r.solver_failures},
                     {"nonfinite", r.nonfinite},
                     {"speed_limit", r.speed_limit},
+                    {"energy_rejections", r.energy_rejections},
                     {"newton_unconverged", r.newton_unconverged},
                     {"max_speed_m_s", num(r.max_speed_m_s)},
                     {"min_volume_ratio", num(r.min_volume_ratio)},

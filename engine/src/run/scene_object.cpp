@@ -163,6 +163,7 @@ sim::SimulatorOptions simulator_options(const Scene& scene) {
   o.factor_lag = s.factor_lag;
   o.threads = s.threads;
   o.max_speed = s.max_speed;
+  o.energy_guard = s.energy_guard;
   return o;
 }
 

@@ -476,6 +476,7 @@ void World::Impl::record_state(Report& r) const {
   r.solver_failures = st.solver_failures;
   r.nonfinite = st.nonfinite;
   r.speed_limit = st.speed_limit;
+  r.energy_rejections = st.energy_rejections;
   r.newton_unconverged = st.newton_unconverged;
   r.max_speed_m_s = st.max_speed;
   r.min_volume_ratio = st.min_volume_ratio;

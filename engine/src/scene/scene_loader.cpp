@@ -401,6 +401,7 @@ SolverSettings to_solver(const json& solver) {
   s.factor_lag = solver["factor_lag"].get<int>();
   s.threads = solver["threads"].get<int>();
   s.max_speed = solver["max_speed"].get<double>();
+  s.energy_guard = solver["energy_guard"].get<double>();
   return s;
 }
 

@@ -249,6 +249,11 @@ Entry make_scene_schema() {
           integer("threads", 0, closed(0, 256), "Worker threads; 0 uses the hardware concurrency."),
           number("max_speed", 100.0, greater_than(0),
                  "Speed guard, m/s: a step that moves any DOF faster is rolled back."),
+          number("energy_guard", 1e-3, closed(0, 1),
+                 "Energy guard, relative: a step in which no handle moves and whose kinetic + elastic energy rises by "
+                 "more than the work of gravity and the rigid shapes (less what the contact penalty springs take up), "
+                 "plus this fraction of the largest of those energies, is rolled back and retried as two halves (not "
+                 "at the smallest step). 0 turns it off."),
       },
       "Time integration and linear solver.");
 

@@ -65,9 +65,10 @@ class FemSystem {
   /// Points the system at `model`, which must be the model it was built for, moved to another address, and runs its
   /// element loops on `executor` from now on.
   void rebind(const ObjectModel& model, Executor& executor);
-  /// Like elastic_force, and also the product K v of the corotated stiffness with v (both 3 num_dofs).
-  void force_and_product(const std::vector<Vec3>& x, const ElementFrame& frame, const VecX& v, VecX& f,
-                         VecX& kv) const;
+  /// Like elastic_force, and also the product K v of the corotated stiffness with v (both 3 num_dofs); with
+  /// `energy`, also the elastic energy at x (J, as elastic_energy gives it, summed in element order).
+  void force_and_product(const std::vector<Vec3>& x, const ElementFrame& frame, const VecX& v, VecX& f, VecX& kv,
+                         double* energy = nullptr) const;
 
  private:
   struct Impl;

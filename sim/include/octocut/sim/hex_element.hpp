@@ -46,8 +46,9 @@ Mat3 gram_schmidt_rotation(const Mat3& m);
 /// Corotated displacement R^T (x - x_c) - (X - X_c) of the 8 corners relative to their centroids (m, 24).
 Vec24 corotated_displacement(const Mat3& R, const Vec24& x, const Vec24& X);
 
-/// Restoring force -R K (R^T x - X) of one element (N, 24), with K = E h K_unit scaled by occupancy (K given).
-Vec24 corotated_force(const Mat24& K, const Mat3& R, const Vec24& x, const Vec24& X);
+/// Restoring force -R K (R^T x - X) of one element (N, 24), with K = E h K_unit scaled by occupancy (K given); with
+/// `energy`, also its elastic energy u^T K u / 2 (J).
+Vec24 corotated_force(const Mat24& K, const Mat3& R, const Vec24& x, const Vec24& X, double* energy = nullptr);
 
 /// The corotated stiffness R K R^T (24 x 24).
 Mat24 corotated_stiffness(const Mat24& K, const Mat3& R);

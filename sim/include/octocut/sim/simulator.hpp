@@ -2,6 +2,7 @@
 // The linearised implicit Euler step, the static Newton solve, and the step guards (SPEC §3), over the FEM system of
 // fem_system.hpp.
 #include <memory>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -27,6 +28,10 @@ struct SimulatorOptions {
   int factor_lag = 0;  ///< pcg: solves a background refresh of the lagged factor may take; 0 = refresh inline
   double max_speed = 100.0;                    ///< m/s; a faster DOF makes the step fail and roll back
   int max_halvings = 4;                        ///< retries with half the step before giving up on a step
+  /// Energy guard, relative: an attempt in which no handle moves and whose kinetic + elastic energy rises by more than
+  /// the work of gravity and the rigid shapes (less what the contact penalty springs take up), plus energy_guard times
+  /// the largest of these energies, is rolled back and retried as two halves, except at the smallest dt; 0 turns it off.
+  double energy_guard = 1e-3;
 };
 
 /// Counters of numerical trouble and recovery, reported in report.json `stability`.
@@ -36,6 +41,7 @@ struct StabilityStats {
   int nonfinite = 0;         ///< attempts rejected for NaN/Inf
   int speed_limit = 0;       ///< attempts rejected for exceeding max_speed
   int solver_failures = 0;   ///< attempts rejected because the linear solve did not converge or A was not SPD
+  int energy_rejections = 0;  ///< attempts rejected because the energy rose without work put in
   int newton_unconverged = 0;  ///< static solves that stopped at max_iterations
   double max_speed = 0.0;    ///< largest DOF speed seen, m/s
   /// Smallest element volume ratio (det F at an element's centre, deformed over rest) at the start of a dynamic
@@ -152,7 +158,14 @@ class Simulator {
 
  private:
   // One implicit Euler attempt of length dt; false (state untouched) when it fails a guard.
-  bool try_dynamic_step(double dt);
+  // `may_reject`: the energy guard may reject the attempt (not at the smallest dt).
+  bool try_dynamic_step(double dt, bool may_reject);
+  // Whether the energy guard checks an attempt with handle targets `target` (see energy_holds).
+  [[nodiscard]] bool energy_guarded(bool may_reject, const std::vector<Vec3>& target) const;
+  // The energy guard at the committed state: with `check`, its test against the start's energy e0 (J) and positions
+  // x0 (num_dofs), with the rigid shapes' work and the penalty springs' change over the attempt (J); keeps the new
+  // state's rotations, forces and energy for the next step when it passes.
+  bool energy_holds(bool check, double e0, const std::vector<Vec3>& x0, double work, double penalty);
   // Velocity increments (3 num_dofs) that take the handle DOFs to their pose at t + dt, held in `target` (num_dofs).
   [[nodiscard]] VecX prescribed_increments(double dt, std::vector<Vec3>& target) const;
   // Assembles and solves the implicit Euler system for the velocity increment dv (3 num_dofs).
@@ -185,6 +198,13 @@ class Simulator {
   SimState m_state;
   StabilityStats m_stats;
   SolveInfo m_last_solve;
+  /// Counts the changes of m_state (each commit, rollback, reset, new model or state), so that what was computed from
+  /// one state is reused only for that state.
+  std::uint64_t m_state_version = 0;
+  struct StepStart;  ///< what the energy guard computed at a state, for the step that starts from it (simulator.cpp)
+  std::unique_ptr<StepStart> m_next_start;
+  double m_energy = 0.0;  ///< J, kinetic + elastic energy of the state of version m_energy_version (energy guard)
+  std::uint64_t m_energy_version = ~std::uint64_t(0);
   StepProfile m_profile;
   std::unique_ptr<Executor> m_executor;
   std::unique_ptr<FemSystem> m_fem;

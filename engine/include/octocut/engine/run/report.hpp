@@ -131,6 +131,7 @@ struct Report {
   ContactSummary contact;
   bool finite = true;
   long recoveries = 0, failed_steps = 0, solver_failures = 0, nonfinite = 0, speed_limit = 0, newton_unconverged = 0;
+  long energy_rejections = 0;  ///< step attempts the energy guard rolled back (solver.energy_guard)
   double max_speed_m_s = 0.0;
   double min_volume_ratio = 1.0;  ///< smallest element det F seen at the start of a step (dimensionless)
   double kinetic_j = 0.0, elastic_j = 0.0;

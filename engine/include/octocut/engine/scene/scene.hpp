@@ -79,6 +79,7 @@ struct SolverSettings {
   int factor_lag = 0;                      ///< pcg: solves a background refresh of the factor may take; 0 inline
   int threads = 0;                         ///< 0 = auto (hardware concurrency)
   double max_speed = 100.0;                ///< m/s; a guard: faster DOFs roll the step back
+  double energy_guard = 1e-3;              ///< relative; a step whose energy rises without work is rolled back
 };
 
 /// A rest-space point whose displacement the report records (`probes[]`).

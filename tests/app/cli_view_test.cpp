@@ -310,7 +310,11 @@ TEST_F(CliViewTest, HeldToolPushesTissue) {
   const std::string id = window.substr(0, window.find('\n'));
   ASSERT_TRUE(wait_for([&] { return sim_time() >= 0.0; }, deadline(40s))) << log();
   xdotool("mousemove --sync --window " + id + " 400 300");  // the window's centre, right of the panel
+  // The placement must be a frame of its own before the first W (on a loaded machine a frame can take longer than
+  // 500 ms, and the placement and the press then land in one frame): wait for 0.1 s of simulated time as well.
+  const double placed = sim_time();  // s
   std::this_thread::sleep_for(500ms);
+  ASSERT_TRUE(wait_for([&] { return sim_time() >= placed + 0.1; }, deadline(10s))) << log();
   xdotool("key w");
   // The block settles under the first press before the second (0.2 s, 7 settling times): the penetration check below
   // takes one press at a time. In Release 600 ms of wall time is more than that; slower builds wait for it.

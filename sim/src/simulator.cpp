@@ -1,6 +1,5 @@
 #include "octocut/sim/simulator.hpp"
 
-#include <cstdlib>
 #include <algorithm>
 #include <cmath>
 #include <functional>
@@ -391,6 +390,8 @@ bool Simulator::try_dynamic_step(double dt, bool may_reject) {
   if (!solve_increment(dt, dv_c, dv) || !commit_step(dt, dv, target)) return false;
   double work = 0.0, penalty = 0.0;  // J: the rigid shapes' work through the contacts, the penalty springs' change
   if (!m_contacts.empty()) {
+    // The forces of this (part of the) step, and what they did.
+    const auto t0 = Clock::now();
     m_outcomes = sim::contact_outcomes(m_contacts, dt, v0, dv);
     for (std::size_t i = 0; i < m_contacts.size(); ++i) {
       // The normal force is k (d_end - d_start + max(d_start, 0)) (contact.cpp): its potential is k d~^2 / 2 with
@@ -400,13 +401,14 @@ bool Simulator::try_dynamic_step(double dt, bool may_reject) {
       work += dt * m_outcomes[i].force.dot(c.rigid_velocity);
       penalty += 0.5 * c.stiffness * (d1 * d1 - d0 * d0);
     }
+    m_profile.contact += ms_since(t0);
   }
   if (m_options.energy_guard > 0.0 && !energy_holds(guard, e0, x0, work, penalty)) {
     ++m_stats.energy_rejections;
     return false;
   }
   if (!m_contacts.empty()) {
-    // The forces of this (part of the) step, and where the next part starts from.
+    // Where the next part starts from.
     m_contact_energy.work_j += work;
     m_contact_energy.penalty_change_j += penalty;
     for (std::size_t i = 0; i < m_contacts.size(); ++i) m_contacts[i].penetration = m_outcomes[i].penetration;
@@ -420,10 +422,14 @@ bool Simulator::try_dynamic_step(double dt, bool may_reject) {
 // K v it computes at the new state are the next step's start (solve_increment), so the guard costs the elastic
 // energy's few operations per element, not another pass.
 bool Simulator::energy_holds(bool check, double e0, const std::vector<Vec3>& x0, double work, double penalty) {
+  // Timed as this attempt's rotations and forces: the next step finds them done.
+  auto t0 = Clock::now();
   auto next = std::make_unique<StepStart>();
   m_fem->rotations(m_state.x, next->frame);
+  m_profile.rotations += lap(t0);
   double elastic = 0.0;
   m_fem->force_and_product(m_state.x, next->frame, flatten(m_state.v), next->f_el, next->kv, &elastic);
+  m_profile.forces += lap(t0);
   const double e1 = kinetic_energy() + elastic;
   if (check) {
     double gravity_work = 0.0;
@@ -482,11 +488,14 @@ void Simulator::step() {
     if (depth >= m_options.max_halvings) return false;
     return advance(0.5 * h, depth + 1) && advance(0.5 * h, depth + 1);
   };
-  const int failures_before = m_stats.nonfinite + m_stats.speed_limit + m_stats.solver_failures + m_stats.energy_rejections;
+  const auto rejected = [&] {  // attempts rejected so far, for any cause
+    return m_stats.nonfinite + m_stats.speed_limit + m_stats.solver_failures + m_stats.energy_rejections;
+  };
+  const int failures_before = rejected();
   const bool ok = advance(dt, 0);
   m_contacts.clear();  // found anew by the caller for the next step
   if (ok) {
-    if (m_stats.nonfinite + m_stats.speed_limit + m_stats.solver_failures + m_stats.energy_rejections > failures_before) ++m_stats.recoveries;
+    if (rejected() > failures_before) ++m_stats.recoveries;
     return;
   }
   m_outcomes.clear();

@@ -1,7 +1,7 @@
 // Issue 2 stability matrix on the 1 cm cube of 10 x 10 x 10 leaves: stiff, nearly incompressible, huge steps, a
 // crush to 5% of the height, and a 360 degree twist all run without a failed step and without an attempt rejected for
 // NaN, speed or the linear solve, and stay bounded. The energy guard (SimulatorOptions::energy_guard) may retry an
-// attempt whose energy rose without work put in: the B-bar crush needs it once.
+// attempt whose energy rose without work put in: the B-bar crush retries one step that way.
 #include <gtest/gtest.h>
 
 #include "test_util.hpp"

@@ -1,8 +1,8 @@
 #pragma once
 // The linearised implicit Euler step, the static Newton solve, and the step guards (SPEC §3), over the FEM system of
 // fem_system.hpp.
-#include <memory>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 

@@ -238,9 +238,21 @@ int snap_target(const sim::TriMesh& blade, const std::vector<sim::TriMesh>& earl
   // The latest candidate within min_feature wins. The distance is the Hausdorff distance of the two solids within
   // the region: the distance to a convex solid is a convex function, so its largest value over a convex body
   // (blade ∩ region) is taken at one of its corners.
+  // A cheap bound first: blade ∩ region reaching more than min_feature past the box of an earlier blade within the
+  // region (which holds that blade ∩ region) along an axis has a corner farther than that from it.
+  Vec3 lo = corners.front(), hi = lo;  // m: the box of blade ∩ region
+  for (const Vec3& q : corners) {
+    lo = lo.cwiseMin(q);
+    hi = hi.cwiseMax(q);
+  }
   for (std::size_t k = earlier.size(); k-- > 0;) {
     const sim::TriMesh& e = earlier[k];
     if (e.vertices.size() != blade.vertices.size() || e.triangles != blade.triangles) continue;
+    const sim::Box3 eb = sim::bounds(e);
+    const Vec3 elo = eb.min.cwiseMax(region.min), ehi = eb.max.cwiseMin(region.max);
+    const bool clipped_empty = (elo.array() > ehi.array()).any();
+    if (!clipped_empty && ((lo - elo).minCoeff() <= -(min_feature + tol) || (hi - ehi).maxCoeff() >= min_feature + tol))
+      continue;
     const ConvexSolid other = convex_solid(e, tol);
     if (other.planes.empty()) continue;
     double d = 0.0;  // m

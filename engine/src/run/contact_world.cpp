@@ -134,6 +134,22 @@ double signed_distance(const Collider& c, const btTransform& pose, const Vec3& p
   return inside ? -cb.best : cb.best;
 }
 
+// signed_distance for a sample whose penetration at its last query was `last` (m; 0: it was outside), searched
+// within `depth` (m) when it was outside. A sample inside a triangle mesh is followed deeper, so that a tool pressing
+// on keeps it: first within 1.25 `last` (the nearest triangle found there is the nearest within any larger cube, the
+// same triangle and the same tie-break, since the box query visits a subset in the same order), and only when
+// nothing is that near within 2 `last`.
+double tracked_distance(const Collider& c, const btTransform& pose, const Vec3& p, double depth, double last,
+                        Vec3& normal, double& clearance) {
+  const double deep = std::max(depth, 2.0 * last);  // m
+  const double near = std::max(depth, 1.25 * last);  // m
+  if (c.convex == nullptr && near < deep) {
+    const double d = signed_distance(c, pose, p, near, normal, clearance);
+    if (d < near) return d;
+  }
+  return signed_distance(c, pose, p, deep, normal, clearance);
+}
+
 }  // namespace
 
 bool scene_collides(const Scene& scene) {
@@ -316,11 +332,38 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
     c.last_depth.assign(std::size_t(n), 0.0);
   }
   const btVector3 com = c.dynamic ? c.body->getCenterOfMassPosition() : btVector3(0, 0, 0);
-  // The samples in chunks, in parallel when an executor is given: each sample reads and writes only its own cache
-  // entries, and Bullet's queries on a shape are read-only. The chunks' contacts are joined in sample order, so the
-  // result does not depend on the threads.
-  constexpr int kChunk = 256;
-  const int chunks = (n + kChunk - 1) / kChunk;
+  const bool parallel = executor != nullptr && executor->threads() > 1;
+  // First the samples that need a query: inside Bullet's bounding box of the shape and not within the clearance known
+  // from their last query in the collider's frame (cheap tests, in chunks, joined in sample order).
+  constexpr int kScan = 1024;
+  const int scans = (n + kScan - 1) / kScan;
+  std::vector<std::vector<int>> scanned(static_cast<std::size_t>(scans));
+  const auto scan = [&](int sb, int se) {
+    for (int s = sb; s < se; ++s) {
+      for (int i = s * kScan; i < std::min(n, (s + 1) * kScan); ++i) {
+        const Vec3& p = positions[std::size_t(i)];
+        if (p.x() < lo.x() || p.y() < lo.y() || p.z() < lo.z() || p.x() > hi.x() || p.y() > hi.y() ||
+            p.z() > hi.z())
+          continue;
+        const Vec3 local = pose.rotation.transpose() * (p - pose.position);
+        const double clearance = c.cache_clearance[std::size_t(i)];
+        if (clearance > 0.0 && (local - c.cache_local[std::size_t(i)]).norm() < clearance) continue;
+        scanned[std::size_t(s)].push_back(i);
+      }
+    }
+  };
+  if (parallel && scans > 1)
+    executor->parallel_for(scans, 1, scan);
+  else
+    scan(0, scans);
+  std::vector<int> queried;  // ascending
+  for (const std::vector<int>& s : scanned) queried.insert(queried.end(), s.begin(), s.end());
+  // Then the queries, in small chunks, in parallel when an executor is given (the samples near a tool are few and
+  // close together in S's order, and each query can cost tens of microseconds): each sample reads and writes only its
+  // own cache entries, and Bullet's queries on a shape are read-only. The chunks' contacts are joined in sample order,
+  // so the result does not depend on the threads.
+  constexpr int kChunk = 8;
+  const int chunks = (int(queried.size()) + kChunk - 1) / kChunk;
   struct Found {
     std::vector<sim::Contact> contacts;
     std::vector<ContactRef> refs;
@@ -330,20 +373,13 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
   const auto run = [&](int cb, int ce) {
     for (int chunk = cb; chunk < ce; ++chunk) {
       Found& f = found[std::size_t(chunk)];
-      for (int i = chunk * kChunk; i < std::min(n, (chunk + 1) * kChunk); ++i) {
+      for (int q = chunk * kChunk; q < std::min(int(queried.size()), (chunk + 1) * kChunk); ++q) {
+        const int i = queried[std::size_t(q)];
         const Vec3& p = positions[std::size_t(i)];
-        // Bullet's bounding box of the shape, then the clearance known from the last query in the collider's frame.
-        if (p.x() < lo.x() || p.y() < lo.y() || p.z() < lo.z() || p.x() > hi.x() || p.y() > hi.y() ||
-            p.z() > hi.z())
-          continue;
         const Vec3 local = pose.rotation.transpose() * (p - pose.position);
-        double& clearance = c.cache_clearance[std::size_t(i)];
-        if (clearance > 0.0 && (local - c.cache_local[std::size_t(i)]).norm() < clearance) continue;
         Vec3 normal = Vec3::UnitZ();
-        // A sample already inside a triangle mesh is followed with a deeper search, so that a tool pressing on keeps
-        // it.
         double& last = c.last_depth[std::size_t(i)];
-        const double d = signed_distance(c, tr, p, std::max(depth, 2.0 * last), normal, clearance);
+        const double d = tracked_distance(c, tr, p, depth, last, normal, c.cache_clearance[std::size_t(i)]);
         c.cache_local[std::size_t(i)] = local;
         last = d < 0.0 ? -d : 0.0;
         if (!(d < 0.0)) continue;
@@ -363,7 +399,7 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
       }
     }
   };
-  if (executor != nullptr && executor->threads() > 1 && chunks > 1)
+  if (parallel && chunks > 1)
     executor->parallel_for(chunks, 1, run);
   else
     run(0, chunks);

@@ -1,0 +1,153 @@
+// The distance queries of ContactWorld (a private engine header) against a concave collider mesh, checked against the
+// analytic distance to the boundary of an L-shaped prism: collision samples pushed step by step from outside to deep
+// inside it (ten times the search depth) keep their contact, and each contact's penetration is the distance to the
+// nearest face and its normal points there, on one and on two threads.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "common/temp_dir.hpp"
+#include "octocut/engine/scene/scene_loader.hpp"
+#include "octocut/sim/contact.hpp"
+#include "octocut/sim/parallel.hpp"
+#include "run/contact_world.hpp"
+
+namespace octocut::engine {
+namespace {
+
+using sim::Vec3;
+
+// The L-shaped polygon in the xy plane (cm, counter-clockwise) and the prism's height (cm).
+const std::array<std::array<double, 2>, 6> kL = {{{0, 0}, {2, 0}, {2, 1}, {1, 1}, {1, 2}, {0, 2}}};
+constexpr double kHeight = 1.0;
+
+// The prism as an OBJ in cm: bottom and top as two convex quads each, six side quads, outward oriented.
+std::string l_prism_obj() {
+  std::string s;
+  for (const double z : {0.0, kHeight})
+    for (const auto& p : kL) s += "v " + std::to_string(p[0]) + " " + std::to_string(p[1]) + " " + std::to_string(z) + "\n";
+  // Vertices 1..6 bottom, 7..12 top. Quads (0,1,2,3) and (0,3,4,5) of the polygon.
+  s += "f 1 4 3\nf 1 3 2\nf 1 6 5\nf 1 5 4\n";      // bottom, facing -z
+  s += "f 7 8 9\nf 7 9 10\nf 7 10 11\nf 7 11 12\n";  // top, facing +z
+  for (int i = 0; i < 6; ++i) {
+    const int a = 1 + i, b = 1 + (i + 1) % 6;
+    s += "f " + std::to_string(a) + " " + std::to_string(b) + " " + std::to_string(b + 6) + "\n";
+    s += "f " + std::to_string(a) + " " + std::to_string(b + 6) + " " + std::to_string(a + 6) + "\n";
+  }
+  return s;
+}
+
+// The nearest point of the 2D segment ab to p.
+std::array<double, 2> nearest_on_segment(const std::array<double, 2>& p, const std::array<double, 2>& a,
+                                         const std::array<double, 2>& b) {
+  const double dx = b[0] - a[0], dy = b[1] - a[1];
+  const double t = std::clamp(((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / (dx * dx + dy * dy), 0.0, 1.0);
+  return {a[0] + t * dx, a[1] + t * dy};
+}
+
+bool in_l(double x, double y) { return x > 0 && y > 0 && ((x < 2 && y < 1) || (x < 1 && y < 2)); }
+
+// For a point inside the prism (cm): the distance to its boundary and the outward direction to the nearest boundary
+// point, and the gap to the second-nearest face (to skip points where two faces are about equally near).
+struct Truth {
+  double distance = 0.0;  // cm
+  Vec3 outward = Vec3::Zero();
+  double gap = 0.0;  // cm
+};
+Truth truth(const Vec3& p) {
+  std::vector<std::pair<double, Vec3>> faces = {{p.z(), -Vec3::UnitZ()}, {kHeight - p.z(), Vec3::UnitZ()}};
+  for (std::size_t i = 0; i < kL.size(); ++i) {
+    const auto q = nearest_on_segment({p.x(), p.y()}, kL[i], kL[(i + 1) % kL.size()]);
+    const Vec3 d(q[0] - p.x(), q[1] - p.y(), 0.0);
+    faces.push_back({d.norm(), d.normalized()});
+  }
+  std::sort(faces.begin(), faces.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  return {faces[0].first, faces[0].second, faces[1].first - faces[0].first};
+}
+
+class ContactQuery : public test::TempDirTest {};
+
+TEST_F(ContactQuery, SamplesPressedDeepIntoAConcaveColliderGetTheirDistanceToItsSurface) {
+  write("l.obj", l_prism_obj());
+  const std::string text = R"({
+    "duration": 0.01,
+    "object": {"surface": {"box": {"min": [0.05, 0.05, 0.05], "max": [0.06, 0.06, 0.06]}},
+               "octree": {"base_level": 1, "max_level": 1}},
+    "rigid_bodies": [{"name": "l", "shape": {"mesh": "l.obj", "scale": 0.01}, "motion": "fixed",
+                      "position": [0, 0, 0]}]
+  })";
+  const Scene scene = load_scene(write("scene.json", text).string());
+  constexpr double kDepth = 5e-4;  // m, the search depth for samples that were outside
+  // Samples on a grid over the L's footprint (and a little beyond it), starting 0.2 mm above the top face and
+  // pushed down 0.15 mm per step, 40 steps: to 5.8 mm below the top face (below the prism's middle, where the side
+  // walls and the inner corner are the nearest faces).
+  sim::ContactSamples samples;
+  samples.begin.push_back(0);
+  std::vector<Vec3> x;  // cm grid, stored in m
+  for (double gx = 0.05; gx < 2.1; gx += 0.1)
+    for (double gy = 0.05; gy < 2.1; gy += 0.1) {
+      const Vec3 p(0.01 * gx, 0.01 * gy, 0.01 * kHeight + 2e-4);
+      samples.dofs.push_back({int(x.size()), 1.0});
+      samples.begin.push_back(int(samples.dofs.size()));
+      samples.rest.push_back(p);
+      samples.area.push_back(1e-6);
+      samples.face.push_back(-1);
+      x.push_back(p);
+    }
+  std::vector<std::vector<sim::Contact>> found[2];
+  for (const int threads : {1, 2}) {
+    ContactWorld world(scene, {}, 1e9, kDepth);
+    sim::Executor executor(threads);
+    std::vector<Vec3> xs = x;
+    for (int step = 0; step < 40; ++step) {
+      found[threads - 1].push_back(world.find(samples, xs, 0.001 * step, 0.001, {}, {}, &executor));
+      for (Vec3& p : xs) p.z() -= 1.5e-4;
+    }
+  }
+  ASSERT_EQ(found[0].size(), found[1].size());
+  int checked = 0, deep = 0;
+  std::vector<Vec3> xs = x;
+  for (std::size_t step = 0; step < found[0].size(); ++step) {
+    const std::vector<sim::Contact>& c = found[0][step];
+    // The same contacts on two threads, in the same order.
+    ASSERT_EQ(c.size(), found[1][step].size()) << "step " << step;
+    for (std::size_t k = 0; k < c.size(); ++k) {
+      ASSERT_EQ(c[k].dofs[0].dof, found[1][step][k].dofs[0].dof);
+      ASSERT_EQ(c[k].penetration, found[1][step][k].penetration);
+    }
+    // Every sample inside the prism has a contact, and no other.
+    std::size_t next = 0;
+    for (std::size_t i = 0; i < xs.size(); ++i) {
+      const Vec3 cm = 100.0 * xs[i];
+      const bool inside = in_l(cm.x(), cm.y()) && cm.z() > 0 && cm.z() < kHeight;
+      const bool has = next < c.size() && c[next].dofs[0].dof == int(i);
+      const Truth t = inside ? truth(cm) : Truth{};
+      // Points within float rounding (Bullet's btScalar) of a face may go either way.
+      if (inside && t.distance < 1e-5) {
+        if (has) ++next;
+        continue;
+      }
+      ASSERT_EQ(has, inside) << "step " << step << " sample " << i << " at " << cm.transpose() << " cm";
+      if (!has) continue;
+      const sim::Contact& k = c[next++];
+      EXPECT_NEAR(k.penetration, 0.01 * t.distance, 2e-8) << "step " << step << " sample " << i;
+      if (t.gap > 1e-3) {
+        EXPECT_GT(k.normal.dot(t.outward), 0.9999) << "step " << step << " sample " << i;
+      }
+      ++checked;
+      if (k.penetration > 4.0 * kDepth) ++deep;
+    }
+    EXPECT_EQ(next, c.size());
+    for (Vec3& p : xs) p.z() -= 1.5e-4;
+  }
+  EXPECT_GT(checked, 5000);
+  EXPECT_GT(deep, 1000);  // tracked far deeper than the search depth
+}
+
+}  // namespace
+}  // namespace octocut::engine

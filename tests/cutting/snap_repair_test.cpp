@@ -120,5 +120,44 @@ TEST(RoundingRepair, NearCoincidentBitesAreRepairedNotRejected) {
   EXPECT_NEAR(sim::signed_volume(s), v0 - removed, 1e-12 * v0);
 }
 
+// Punches through the slab whose walls pierce its top and bottom faces 1 um from a vertex of S: the exact result has
+// edges of about 1 um there. With a collapse length of 3 um (SurfaceCutOptions::tiny_edge; the pipeline's 0.01
+// min_feature) they collapse, the result stays watertight, and the removed volume moves from the exact prism's by
+// less than the collapse length times the area that moved (the walls and the faces of S around them).
+TEST(RoundingRepair, EdgesShorterThanTheCollapseLengthCollapseAndTheVolumeMovesByLessThanItTimesTheArea) {
+  constexpr double kTiny = 3e-6;   // m
+  constexpr double kSlab = 0.004;  // m, thickness
+  const TriMesh s = sim::closed_box_grid({Vec3::Zero(), Vec3(0.02, 0.02, kSlab)}, 8);  // 2.5 mm cells
+  const double exact = test::prism_area(kRadius, 32) * kSlab;  // m^3, one hole
+  int cases = 0;
+  for (const Vec3 g : {Vec3(0.005, 0.005, 0.0), Vec3(0.0125, 0.0075, 0.0), Vec3(0.0075, 0.015, 0.0)}) {
+    for (const double angle : {0.3, 1.9, 4.1}) {
+      // The prism's vertex at angle 0 (a vertical edge of the blade) 1 um from the grid vertex g.
+      const Vec3 c = g + Vec3(-kRadius + 1e-6 * std::cos(angle), 1e-6 * std::sin(angle), 0.5 * kSlab);
+      const TriMesh blade = test::prism_mesh(c, kRadius, 2.0 * kSlab, 32);
+      SurfaceCutOptions exact_cut, collapsing;
+      collapsing.tiny_edge = kTiny;
+      const SurfaceCutResult r0 = cut_surface(s, blade, exact_cut);
+      const SurfaceCutResult r1 = cut_surface(s, blade, collapsing);
+      ASSERT_EQ(r0.status, SurfaceCutStatus::ok) << r0.reason;
+      ASSERT_EQ(r1.status, SurfaceCutStatus::ok) << r1.reason;
+      const std::string where = "grid vertex " + std::to_string(g.x()) + ", " + std::to_string(g.y()) + ", angle " +
+                                std::to_string(angle);
+      // The exact cut has the short edges and removes the prism; the collapsing one has none left.
+      EXPECT_LT(r0.min_edge, kTiny) << where;
+      EXPECT_NEAR(r0.removed_volume, exact, 1e-9 * exact) << where;
+      EXPECT_GT(r1.collapses, 0) << where;
+      EXPECT_GE(r1.min_edge, kTiny) << where;
+      test::expect_watertight(r1.mesh, where);
+      EXPECT_NEAR(sim::signed_volume(s) - sim::signed_volume(r1.mesh), r1.removed_volume, 1e-12 * sim::signed_volume(s));
+      // What moved: the hole's wall and the faces of S around it (top and bottom, within a cell of the hole).
+      const double moved_area = 2.0 * M_PI * kRadius * kSlab + 2.0 * std::pow(2.0 * kRadius + 0.005, 2);  // m^2
+      EXPECT_LE(std::abs(r1.removed_volume - exact), kTiny * moved_area) << where;
+      ++cases;
+    }
+  }
+  EXPECT_EQ(cases, 9);
+}
+
 }  // namespace
 }  // namespace octocut::cutting

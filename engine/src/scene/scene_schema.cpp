@@ -382,8 +382,8 @@ Entry make_scene_schema() {
               "`min_feature` of a recent cut's blade (the same blade mesh; Hausdorff distance of the two convex solids "
               "inside S's bounds) or of another unrestricted component's blade of the same cut snaps onto it exactly, "
               "so that near-coincident walls coincide instead of making slivers; the removed volume is that of the "
-              "snapped blade. Edges of a cut's result at new vertices shorter than 1e-3 `min_feature` collapse where "
-              "exact checks allow. 0: off.")},
+              "snapped blade. Edges of a cut's result at new vertices shorter than 0.01 `min_feature` collapse where "
+              "exact checks allow (the surface moves by less than that there). 0: off.")},
       "How cuts are carried out.");
 
   Entry expected = make_entry(

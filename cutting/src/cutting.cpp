@@ -680,7 +680,7 @@ SurfaceEditResult cut_with_blade(SurfaceEditor& editor, const sim::ObjectModel& 
   sopt.removable = nullptr;
   if (!rest.foreign[k].empty())
     sopt.removable = [&model, &f = rest.foreign[k]](const sim::Vec3& p) { return !in_foreign(model, f, p); };
-  // A degenerate configuration that the boolean refuses is retried with the blade moved by 1e-9, then 1e-7, of its
+  // A degenerate configuration that the boolean refuses is retried with the blade moved by 1e-9, 1e-7, 1e-5 of its
   // size; the blade that was used is the one the model stages must use too. A failed attempt leaves S as it was.
   auto [r, moves] = cut_surface_in_place_perturbing(editor, b, sopt);
   if (r.status == SurfaceCutStatus::failed && sopt.removable) {
@@ -696,7 +696,10 @@ SurfaceEditResult cut_with_blade(SurfaceEditor& editor, const sim::ObjectModel& 
       --out.restricted_components;
     }
   }
-  if (moves > 0) ++out.perturbed;
+  if (moves > 0) {
+    ++out.perturbed;
+    out.blade_shift = std::max(out.blade_shift, blade_shift_fraction(moves));
+  }
   if (r.status == SurfaceCutStatus::failed) throw StageFailure("surface: " + r.reason);
   return std::move(r);
 }

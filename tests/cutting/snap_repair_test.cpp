@@ -130,7 +130,7 @@ TEST(RoundingRepair, EdgesShorterThanTheCollapseLengthCollapseAndTheVolumeMovesB
   const TriMesh s = sim::closed_box_grid({Vec3::Zero(), Vec3(0.02, 0.02, kSlab)}, 8);  // 2.5 mm cells
   const double exact = test::prism_area(kRadius, 32) * kSlab;  // m^3, one hole
   int cases = 0;
-  for (const Vec3 g : {Vec3(0.005, 0.005, 0.0), Vec3(0.0125, 0.0075, 0.0), Vec3(0.0075, 0.015, 0.0)}) {
+  for (const Vec3& g : {Vec3(0.005, 0.005, 0.0), Vec3(0.0125, 0.0075, 0.0), Vec3(0.0075, 0.015, 0.0)}) {
     for (const double angle : {0.3, 1.9, 4.1}) {
       // The prism's vertex at angle 0 (a vertical edge of the blade) 1 um from the grid vertex g.
       const Vec3 c = g + Vec3(-kRadius + 1e-6 * std::cos(angle), 1e-6 * std::sin(angle), 0.5 * kSlab);

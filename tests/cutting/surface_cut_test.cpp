@@ -372,7 +372,7 @@ TEST(SurfaceCut, GridAlignedBoxesRemoveTheirExactIntersectionWithTheCube) {
   // at thirds then round), cut from the unit cube meshed at quarters: faces coplanar with the cube's, edges along its
   // edges, vertices on its vertices, and intersection points a few ulps apart. The removed volume is that of the
   // box's intersection with the cube; a degenerate position that the boolean cannot round is moved by 1e-9 (or
-  // 1e-7) of the blade's size, which changes the volume by less than 1e-6.
+  // 1e-7, 1e-5) of the blade's size, which changes the volume by less than 1e-6 (1e-4 for the last).
   const TriMesh s = test::grid_cube(4, 1.0);
   uint64_t state = 777;
   const auto next = [&](int n) {  // in [0, n)
@@ -403,7 +403,7 @@ TEST(SurfaceCut, GridAlignedBoxesRemoveTheirExactIntersectionWithTheCube) {
       continue;
     }
     expect_valid_cut(s, r, what);
-    EXPECT_NEAR(r.removed_volume, expected, moves > 0 ? 1e-6 : 1e-12) << what;
+    EXPECT_NEAR(r.removed_volume, expected, moves > 2 ? 1e-4 : moves > 0 ? 1e-6 : 1e-12) << what;
     ++ok;
   }
   EXPECT_GE(ok, 150);

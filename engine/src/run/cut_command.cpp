@@ -50,7 +50,7 @@ CutCommandResult run_cut_command(const CutCommandOptions& o) {
   auto t0 = Clock::now();
   cutting::SurfaceCutOptions so;
   so.verify = o.verify;
-  // A degenerate blade position that the exact boolean cannot round is moved by 1e-9 (then 1e-7) of the blade's
+  // A degenerate blade position that the exact boolean cannot round is moved by 1e-9 (then 1e-7, 1e-5) of the blade's
   // size, as in the cut pipeline; the report says so.
   auto [cut, perturbed] = cutting::cut_surface_perturbing(surface, blade, so);
   const double ms_surface = ms_since(t0);
@@ -94,7 +94,7 @@ CutCommandResult run_cut_command(const CutCommandOptions& o) {
   j["input_triangles"] = surface.num_triangles();
   j["output_triangles"] = result.num_triangles();
   j["patch_triangles"] = cut.patch_triangles;
-  j["blade_perturbed"] = perturbed;  // 0, or 1 / 2: the blade was moved by 1e-9 / 1e-7 of its size
+  j["blade_perturbed"] = perturbed;  // 0, or 1 / 2 / 3: the blade was moved by 1e-9 / 1e-7 / 1e-5 of its size
   j["material_graph"] = {{"cell_size_m", h}, {"tets", tets}, {"tets_removed", tets_removed}};
   j["ms"] = {{"surface", ms_surface}, {"material_graph", ms_graph}, {"total", ms_total}};
   try {

@@ -36,6 +36,12 @@ std::string format_seconds(double t) {
   return b;
 }
 
+std::string format_fraction(double f) {
+  char b[32];
+  std::snprintf(b, sizeof(b), "%.0e", f);
+  return b;
+}
+
 // A tool at run time: its keyframes as poses, its blade (loaded for tools with cut events, or on the first cut_now),
 // its render mesh when drawn, and the pose a person set.
 struct ToolRuntime {
@@ -403,7 +409,8 @@ CutSummary World::Impl::cut(std::size_t i, double t, bool scheduled) {
   const std::string what = "cut at t = " + format_seconds(t) + " by " + c.tool;
   if (o.status == "skipped") warnings.push_back(what + " skipped: " + o.reason);
   if (o.perturbed > 0)
-    warnings.push_back(what + ": a degenerate blade position was moved by 1e-9 of the blade's size");
+    warnings.push_back(what + ": a degenerate blade position was moved by " + format_fraction(o.blade_shift) +
+                       " of the blade's size");
   if (o.unrestricted > 0)
     warnings.push_back(what + ": the blade also covered other material in rest space, and could not be kept off it (" +
                        std::to_string(o.unrestricted) + " component(s)): it cut all of it");

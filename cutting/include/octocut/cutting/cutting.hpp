@@ -115,7 +115,8 @@ struct CutOutcome {
   int fragments_removed = 0;          ///< loose pieces removed from the simulation
   double fragment_volume = 0.0;       ///< their material volume, m^3
   double max_blend = 0.0;             ///< largest shape-matching blend towards the rotation (0: none)
-  int perturbed = 0;                  ///< blades moved by 1e-9 (or 1e-7) of their size to leave a degenerate case
+  int perturbed = 0;                  ///< blades moved by 1e-9, 1e-7 or 1e-5 of their size to leave a degenerate case
+  double blade_shift = 0.0;           ///< the largest of those moves, relative to the blade's size (0: none)
   int snapped = 0;                    ///< rest-space blades replaced by an earlier cut's within min_feature of them
                                       ///< (near-coincident walls snap together: snap_target)
   int unrestricted = 0;               ///< of the restricted components, those whose restricted boolean could not be

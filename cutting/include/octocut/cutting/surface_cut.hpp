@@ -93,6 +93,10 @@ struct SurfaceEditResult {
 SurfaceEditResult cut_surface_in_place(SurfaceEditor& editor, const sim::TriMesh& blade,
                                        const SurfaceCutOptions& options = {});
 
+/// The shift of retry `attempt` (1, 2 or 3) of cut_surface_perturbing, relative to the blade's bounding-box diagonal:
+/// 1e-9, 1e-7, 1e-5; 0 for attempt 0 (no move).
+double blade_shift_fraction(int attempt);
+
 /// cut_surface_in_place with the retries of cut_surface_perturbing.
 std::pair<SurfaceEditResult, int> cut_surface_in_place_perturbing(SurfaceEditor& editor, sim::TriMesh& blade,
                                                                   const SurfaceCutOptions& options = {});
@@ -111,10 +115,11 @@ SurfaceCutResult cut_surface(const sim::TriMesh& surface, const sim::TriMesh& bl
 
 /// cut_surface for blades in degenerate positions. The exact result is rounded to doubles, and in a degenerate
 /// configuration two distinct intersection points can round to one (a blade vertex a few ulps from a surface edge,
-/// say), which the cut then refuses. A failed cut is retried with the blade translated by 1e-9, then 1e-7, of its
-/// bounding-box diagonal along a fixed generic direction: simulation of simplicity in its simplest form,
-/// deterministic, and far below any tissue scale. `blade` becomes the blade that was used, and the return value's
-/// second member counts the moves (0: none; 1 or 2). When every attempt fails, the reason is the first attempt's.
+/// say), which the cut then refuses. A failed cut is retried with the blade translated by 1e-9, then 1e-7, then 1e-5
+/// (blade_shift_fraction) of its bounding-box diagonal along a fixed generic direction: simulation of simplicity in
+/// its simplest form, deterministic, and far below any tissue scale (1e-5 of a 1 cm punch is 0.1 um, under the
+/// rounding repair's collapse length). `blade` becomes the blade that was used, and the return value's second member
+/// is the attempt that cut (0: none; 1, 2 or 3). When every attempt fails, the reason is the first attempt's.
 std::pair<SurfaceCutResult, int> cut_surface_perturbing(const sim::TriMesh& surface, sim::TriMesh& blade,
                                                         const SurfaceCutOptions& options = {});
 

@@ -3,6 +3,7 @@
 // --emit-jobs + collect, the stability matrix's verdicts, and bad input exiting 2.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -144,6 +145,64 @@ TEST_F(CliStudyTest, RichardsonReferenceIsTheExtrapolationOfTheUniformRuns) {
   }
   expect_errors_match_reports(out, study, expected);
   EXPECT_NE(octocut::engine::read_file(out / "study.md").find("Richardson extrapolation"), std::string::npos);
+}
+
+// The Richardson reference refuses to extrapolate a sequence that oscillates or does not converge, and then says how
+// far its finest run moved at the last refinement instead of claiming no error. The cases' reports are written by
+// hand (probe values chosen for each kind of sequence) and collected as if they had run elsewhere.
+TEST_F(CliStudyTest, RichardsonRefusesSequencesThatOscillateOrDiverge) {
+  const fs::path dir = m_dir / "acc";
+  const auto e = run_octocut("study accuracy '" + kCantilever + "' --out '" + dir.string() + "' --emit-jobs '" +
+                             (m_dir / "jobs.txt").string() + "' --quiet" + kTinySweep + " --set '/study/tolerances=[]'");
+  ASSERT_EQ(e.exit_code, 0) << e.output;
+  // z displacements (m) of the probes at levels 3, 4, 5.
+  auto collect = [&](const std::array<double, 3>& tip, const std::array<double, 3>& mid) {
+    for (int k = 0; k < 3; ++k) {
+      const json report = {
+          {"status", "ok"},
+          {"probes", {{"tip", {{"displacement", {0.0, 0.0, tip[std::size_t(k)]}}}},
+                      {"mid", {{"displacement", {0.0, 0.0, mid[std::size_t(k)]}}}}}},
+          {"timing_ms", {{"step", {{"median", 1.0 + k}}}}},
+          {"wall_time_s", 1.0},
+          {"counts", {{"elements", 10 << (3 * k)}, {"dofs", 30 << (3 * k)}}}};
+      const fs::path c = dir / "cases" / ("uniform-L" + std::to_string(3 + k) + "-trilinear-cholmod");
+      fs::create_directories(c);
+      std::ofstream(c / "report.json") << report.dump();
+    }
+    const auto r = run_octocut("study collect '" + dir.string() + "' --quiet");
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    return read_json(dir / "study.json")["reference"];
+  };
+  // tip oscillates (down 0.3 mm, then up 0.05 mm); mid converges monotonically with order 2.
+  json ref = collect({-1.0e-3, -1.3e-3, -1.25e-3}, {-1.0e-4, -1.2e-4, -1.25e-4});
+  EXPECT_EQ(ref["extrapolated"], 1);
+  EXPECT_EQ(ref["probes"]["tip"], json({0.0, 0.0, -1.25e-3}));  // the finest run
+  EXPECT_TRUE(ref["order"]["tip"].is_null());
+  EXPECT_NEAR(ref["estimated_error"]["tip"].get<double>(), 0.05 / 1.25, 1e-12);
+  EXPECT_NEAR(ref["order"]["mid"].get<double>(), 2.0, 1e-9);
+  const double mid = -1.25e-4 - 0.05e-4 / 3.0;
+  EXPECT_NEAR(ref["probes"]["mid"][2].get<double>(), mid, 1e-12 * 1.25e-4);
+  EXPECT_NEAR(ref["estimated_error"]["mid"].get<double>(), (0.05e-4 / 3.0) / -mid, 1e-9);
+  bool said = false;
+  for (const json& n : ref["notes"]) said |= n.get<std::string>().find("probe tip") != std::string::npos &&
+                                            n.get<std::string>().find("oscillates") != std::string::npos;
+  EXPECT_TRUE(said) << ref["notes"];
+  const std::string md = octocut::engine::read_file(dir / "study.md");
+  EXPECT_NE(md.find("at 1 of 2 probes, the finest run at the others"), std::string::npos) << md;
+  // The line that plans the study again names the /study/ keys it was planned with.
+  EXPECT_NE(md.find("Reproduce: `octocut study accuracy " + kCantilever + " --out DIR --set '/study/elements=[\"trilinear"
+                    "\"]' --set '/study/levels=[3,4,5]' --set '/study/tolerances=[]'`"),
+            std::string::npos)
+      << md;
+  const json rows = read_json(dir / "study.json")["rows"];
+  EXPECT_EQ(rows[2]["error"]["probes"]["tip"].get<double>(), 0.0);
+  EXPECT_NEAR(rows[2]["error"]["probes"]["mid"].get<double>(), (0.05e-4 / 3.0) / -mid, 1e-9);
+  // Both grow: no extrapolation anywhere, and the estimated errors are the last changes.
+  ref = collect({-1.0e-3, -1.1e-3, -1.3e-3}, {-1.0e-4, -1.05e-4, -1.2e-4});
+  EXPECT_EQ(ref["extrapolated"], 0);
+  EXPECT_NEAR(ref["estimated_error"]["tip"].get<double>(), 0.2 / 1.3, 1e-12);
+  EXPECT_NEAR(ref["estimated_error"]["mid"].get<double>(), 0.15 / 1.2, 1e-12);
+  EXPECT_NE(octocut::engine::read_file(dir / "study.md").find("converges monotonically at no probe"), std::string::npos);
 }
 
 TEST_F(CliStudyTest, EmittedJobsAndCollectGiveTheSameStudyAsJobs) {

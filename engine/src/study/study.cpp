@@ -44,6 +44,9 @@ int run_study(const StudyOptions& options) {
   plan.scene = fs::absolute(options.scene).lexically_normal().string();
   plan.executable = options.executable;
   plan.sets = sets;
+  ojson given = ojson::object();  // the /study/ keys as given, for the files' "Reproduce" line
+  for (const auto& [key, value] : study_sets) given[key] = value;
+  plan.settings["study_sets"] = given;
   const fs::path out = fs::absolute(options.out_dir);
   fs::create_directories(out);
   if (plan.kind == "accuracy") plan.reference = plan_reference(options.reference, scene, plan, out);

@@ -73,46 +73,64 @@ std::vector<const Row*> uniform_sequence(const std::vector<Row>& rows, const std
   return seq;
 }
 
-// Richardson extrapolation of one element's uniform sequence (the finest three levels, h halving each level):
-// p = log2(|u1 - u0| / |u2 - u1|) per probe, u = u2 + (u2 - u1) / (2^p - 1). With two levels p = 2 is assumed;
-// with one, or when the sequence does not converge, the finest run is the reference. Returns the reference entry.
+// Richardson extrapolation of one element's uniform sequence (the finest three levels u0, u1, u2, h halving each
+// level), per probe. With d1 = u1 - u0 and d2 = u2 - u1, the sequence converges monotonically when the two changes
+// point the same way (d1 . d2 > 0) and shrink (|d1| > |d2|): then p = log2(|d1| / |d2|) and u = u2 + d2 / (2^p - 1),
+// and the estimated error of u2 is |u - u2| / |u|. Otherwise (the changes point opposite ways: the sequence
+// oscillates, and extrapolating along d2 would move away from the limit; or they grow) extrapolation is refused:
+// the finest run is the reference, and its estimated error is the last refinement's change |d2| / |u2|, never zero.
+// With two levels p = 2 is assumed; with one the finest run is the reference and the error is unknown (null).
+// Returns the reference entry; "extrapolated" counts the probes that were.
 ojson richardson(const std::vector<const Row*>& seq, const std::string& element) {
   ojson ref = {{"kind", "richardson"}, {"element", element}, {"levels", ojson::array()}, {"probes", ojson::object()},
-               {"order", ojson::object()}, {"estimated_error", ojson::object()}, {"notes", ojson::array()}};
+               {"order", ojson::object()}, {"estimated_error", ojson::object()}, {"notes", ojson::array()},
+               {"extrapolated", 0}};
   if (seq.empty()) {
     ref["notes"].push_back("no uniform run of element " + element + " finished; no reference");
     return ref;
   }
   const std::size_t n = seq.size(), k0 = n >= 3 ? n - 3 : 0;
   for (std::size_t k = k0; k < n; ++k) ref["levels"].push_back(seq[k]->c->params["level"]);
+  int extrapolated = 0;
   for (const auto& [name, u2] : seq.back()->probes) {
     Vec3d u = u2;
-    double p = NAN;
+    double p = NAN, error = NAN;
     if (n >= 2) {
-      const Vec3d u1 = seq[n - 2]->probes.at(name);
-      const Vec3d d2 = sub(u2, u1);
+      const Vec3d d2 = sub(u2, seq[n - 2]->probes.at(name));
       p = 2.0;
       if (n >= 3) {
-        const double ratio = norm(sub(u1, seq[n - 3]->probes.at(name))) / norm(d2);
-        p = std::isfinite(ratio) && ratio > 1.0 ? std::clamp(std::log2(ratio), 0.5, 6.0) : NAN;
+        const Vec3d d1 = sub(seq[n - 2]->probes.at(name), seq[n - 3]->probes.at(name));
+        const double same_way = d1[0] * d2[0] + d1[1] * d2[1] + d1[2] * d2[2];
+        const double ratio = norm(d1) / norm(d2);
+        p = same_way > 0.0 && std::isfinite(ratio) && ratio > 1.0 ? std::clamp(std::log2(ratio), 0.5, 6.0) : NAN;
+        if (!std::isfinite(p))
+          ref["notes"].push_back(
+              "probe " + name + ": the " + element + " sequence " +
+              (same_way <= 0.0 && norm(d2) > 0.0 ? "oscillates (its last two changes point opposite ways)"
+                                                 : "does not converge (its last change is not the smaller)") +
+              "; Richardson extrapolation is refused: the finest run is the reference, its estimated error the last "
+              "refinement's change");
       }
-      if (std::isfinite(p))
+      if (std::isfinite(p)) {
         for (std::size_t d = 0; d < 3; ++d) u[d] = u2[d] + d2[d] / (std::pow(2.0, p) - 1.0);
-      else
-        ref["notes"].push_back("probe " + name + ": the " + element +
-                               " sequence does not converge monotonically; its finest run is the reference");
+        error = norm(sub(u, u2)) / norm(u);
+        ++extrapolated;
+      } else {
+        error = norm(d2) / norm(u2);
+      }
     }
     if (n == 2) ref["notes"].push_back("two uniform levels only: order 2 assumed for probe " + name);
     if (n == 1) ref["notes"].push_back("one uniform level only: the finest run is the reference for " + name);
     ref["probes"][name] = u;
     ref["order"][name] = std::isfinite(p) ? ojson(p) : ojson(nullptr);
-    ref["estimated_error"][name] = norm(sub(u, u2)) / norm(u);
+    ref["estimated_error"][name] = std::isfinite(error) ? ojson(error) : ojson(nullptr);
   }
+  ref["extrapolated"] = extrapolated;
   return ref;
 }
 
-// The reference of the study: the plan's (a file or ccx), or the Richardson extrapolation of the element whose
-// extrapolation moved its finest run the least (the one that converged best). `finest` receives the finest run of
+// The reference of the study: the plan's (a file or ccx), or the Richardson reference of the element whose worst
+// estimated error (over the probes) is the smallest: the one that converged best. `finest` receives the finest run of
 // the reference's element, against which the field error is measured.
 ojson resolve_reference(const Plan& plan, const std::vector<Row>& rows, const Row*& finest) {
   const std::vector<std::string> elements = plan.settings.at("elements");
@@ -125,7 +143,8 @@ ojson resolve_reference(const Plan& plan, const std::vector<Row>& rows, const Ro
     for (const std::string& e : elements) {
       ojson r = richardson(uniform_sequence(rows, e), e);
       double worst = 0.0;
-      for (const auto& [name, v] : r["estimated_error"].items()) worst = std::max(worst, v.get<double>());
+      for (const auto& [name, v] : r["estimated_error"].items())
+        worst = v.is_number() ? std::max(worst, v.get<double>()) : INFINITY;
       if (!r["probes"].empty() && worst < best_err) {
         best_err = worst;
         best = r;
@@ -217,9 +236,28 @@ std::string reference_sentence(const ojson& ref) {
            ", with the same clamps and loads";
   std::string levels;
   for (const ojson& l : ref.at("levels")) levels += (levels.empty() ? "" : ", ") + std::to_string(l.get<int>());
-  return "Richardson extrapolation of the uniform " + ref.at("element").get<std::string>() +
-         " sequence (levels " + levels + ", h halving per level; the element whose extrapolation moved its finest "
-         "run the least), not an independent solution";
+  const std::string element = ref.at("element");
+  const int extrapolated = ref.value("extrapolated", 0), probes = int(ref.at("probes").size());
+  const std::string how = extrapolated == probes ? "Richardson extrapolation of the uniform " + element + " sequence"
+                          : extrapolated == 0
+                              ? "the finest uniform " + element + " run: its sequence converges monotonically at "
+                                "no probe, so Richardson extrapolation is refused"
+                              : "Richardson extrapolation of the uniform " + element + " sequence at " +
+                                    std::to_string(extrapolated) + " of " + std::to_string(probes) +
+                                    " probes, the finest run at the others";
+  return how + " (levels " + levels + ", h halving per level; of the elements, the one whose estimated error is the "
+         "smallest), not an independent solution";
+}
+
+// The reference in a few words, for the plot's title.
+std::string reference_title(const ojson& ref) {
+  if (ref.at("kind") != "richardson") return ref.at("kind");
+  const int extrapolated = ref.value("extrapolated", 0), probes = int(ref.at("probes").size());
+  const std::string element = ref.at("element");
+  return extrapolated == probes ? "Richardson extrapolation (" + element + ")"
+         : extrapolated == 0    ? "finest uniform " + element + " run (Richardson refused)"
+                                : "Richardson extrapolation (" + element + ") at " + std::to_string(extrapolated) +
+                                   " of " + std::to_string(probes) + " probes";
 }
 
 std::string plot_script(const ojson& ref, const std::string& name, const std::vector<Row>& rows) {
@@ -234,8 +272,7 @@ std::string plot_script(const ojson& ref, const std::string& name, const std::ve
   if (hi > 0.0) g << "set xrange [" << lo / 2 << ":" << hi * 8 << "]\nset yrange [" << elo / 2 << ":" << ehi * 3 << "]\n";
   g << "set terminal pngcairo size 1280,860 font 'sans,10'\nset output out\n"
     << "set title \"Accuracy against cost: " << name << "\\nreference: "
-    << (ref.at("kind") == "richardson" ? "Richardson extrapolation (" + ref.at("element").get<std::string>() + ")"
-                                       : ref.at("kind").get<std::string>())
+    << reference_title(ref)
     << "\" noenhanced\nset logscale xy\nset grid\nset key top right\n"
     << "set xlabel 'median wall time per step (ms)'\n"
     << "set ylabel 'relative probe error |u - u_{ref}| / |u_{ref}| (max over probes)'\n"
@@ -260,6 +297,20 @@ std::string markdown(const Plan& plan, const std::vector<Row>& rows, const ojson
   for (const std::string& s : plan.sets) m << ", `--set " << s << "`";
   m << ".\n\n**Reference:** " << reference_sentence(ref) << ".\n\n";
   for (const ojson& n : ref.value("notes", ojson::array())) m << "- " << n.get<std::string>() << "\n";
+  if (ref.contains("by_element")) {
+    // Every element's Richardson entry: the reference's, and the others' as a check on it.
+    m << "\n| element | probe | order p | estimated error of the finest run | reference displacement (m) |\n"
+         "|---|---|---:|---:|---|\n";
+    for (const auto& [element, r] : ref.at("by_element").items())
+      for (const auto& [name, u] : r.at("probes").items()) {
+        const ojson& p = r.at("order").at(name);
+        const ojson& e = r.at("estimated_error").at(name);
+        m << "| " << element << (element == ref.at("element") ? " (reference)" : "") << " | " << name << " | "
+          << (p.is_number() ? f(p.get<double>(), "%.2f") : "refused") << " | "
+          << (e.is_number() ? f(e.get<double>(), "%.3g") : "unknown") << " | [" << f(u.at(0).get<double>(), "%.6g")
+          << ", " << f(u.at(1).get<double>(), "%.6g") << ", " << f(u.at(2).get<double>(), "%.6g") << "] |\n";
+      }
+  }
   m << "\n**Error:** per probe, |u - u_ref| / |u_ref| of its displacement vector; `error_max` is the largest over the "
        "probes (the Pareto front's error). `field_l2` is the root-mean-square difference of the displacement over "
        "S's rest vertices against the finest run (`"
@@ -288,9 +339,7 @@ std::string markdown(const Plan& plan, const std::vector<Row>& rows, const ojson
     m << "\n**Warnings:**\n";
     for (const std::string& w : warnings) m << "- " << w << "\n";
   }
-  m << "\nReproduce: `octocut study accuracy " << plan.scene << " --out DIR`";
-  for (const std::string& s : plan.sets) m << " --set '" << s << "'";
-  m << "; the cases' commands are in `study_plan.json`.\n";
+  m << "\nReproduce: `" << reproduce_command(plan) << "`; the cases' commands are in `study_plan.json`.\n";
   return m.str();
 }
 

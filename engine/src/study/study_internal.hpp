@@ -42,6 +42,9 @@ using Vec3d = std::array<double, 3>;
 Plan plan_accuracy(const Scene& scene, const std::map<std::string, ojson>& study_sets);
 /// Plans the stability matrix of `scene`.
 Plan plan_stability(const Scene& scene, const std::map<std::string, ojson>& study_sets);
+/// The command that plans `plan` again, for the Markdown files: `octocut study KIND SCENE --out DIR`, the user's
+/// scene overrides and the `/study/` keys as given.
+std::string reproduce_command(const Plan& plan);
 /// Splits `/study/KEY=JSON` entries off `sets` (the rest stay); throws std::invalid_argument for a bad value.
 std::map<std::string, ojson> take_study_sets(std::vector<std::string>& sets);
 /// The shell command line of case `c` writing into `out_dir/cases/<id>` (single-quoted arguments).

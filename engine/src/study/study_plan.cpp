@@ -67,6 +67,15 @@ void append(std::vector<std::string>& to, const std::vector<std::string>& more) 
 
 }  // namespace
 
+std::string reproduce_command(const Plan& plan) {
+  std::string c = "octocut study " + plan.kind + " " + plan.scene + " --out DIR";
+  for (const std::string& s : plan.sets) c += " --set '" + s + "'";
+  const ojson given = plan.settings.value("study_sets", ojson::object());
+  for (const auto& [key, value] : given.items())
+    c += " --set '/study/" + key + "=" + value.dump() + "'";
+  return c;
+}
+
 std::map<std::string, ojson> take_study_sets(std::vector<std::string>& sets) {
   std::map<std::string, ojson> study;
   std::vector<std::string> rest;

@@ -211,9 +211,7 @@ std::string markdown(const Plan& plan, const std::vector<Cell>& cells, const std
     m << "\n**Warnings:**\n";
     for (const std::string& w : warnings) m << "- " << w << "\n";
   }
-  m << "\nReproduce: `octocut study stability " << plan.scene << " --out DIR`";
-  for (const std::string& x : plan.sets) m << " --set '" << x << "'";
-  m << "; each cell's command is in `study_plan.json`.\n";
+  m << "\nReproduce: `" << reproduce_command(plan) << "`; each cell's command is in `study_plan.json`.\n";
   return m.str();
 }
 

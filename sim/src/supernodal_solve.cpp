@@ -1,12 +1,13 @@
 #include "supernodal_solve.hpp"
 
+#include <Eigen/Core>
 #include <algorithm>
 #include <numeric>
 
 #include "octocut/sim/parallel.hpp"
 
 extern "C" {
-// Single-precision BLAS (the BLAS CHOLMOD links, OpenBLAS on Debian).
+// Single-precision BLAS (the BLAS CHOLMOD links, OpenBLAS on Debian), for the largest supernodes.
 void strsv_(const char* uplo, const char* trans, const char* diag, const int* n, const float* a, const int* lda,
             float* x, const int* incx);
 void sgemv_(const char* trans, const int* m, const int* n, const float* alpha, const float* a, const int* lda,
@@ -16,6 +17,68 @@ void sgemv_(const char* trans, const int* m, const int* n, const float* alpha, c
 namespace octocut::sim {
 
 namespace {
+
+// A supernode's block of L (column-major, leading dimension nsrow) and a piece of a vector. Supernodes with fewer
+// than kBlasEntries entries use Eigen's kernels (SSE2 at -O2, inlined), the others BLAS: most supernodes have 3-24
+// columns, and for those a call to OpenBLAS's strsv and sgemv costs more than its arithmetic (a work buffer taken
+// under a lock that the two threads share, column loops of calls); the large ones near the root gain from its
+// AVX-512 kernels. The factor of meniscus_punch (7,053 columns, 1.27 million entries, 499 supernodes) is applied in
+// 0.26-0.30 ms instead of 0.55 ms; that of meniscus_rest at level 6 (34,050 columns) as fast as with BLAS alone, and
+// 12 % faster than with Eigen alone (docs/RESULTS.md).
+constexpr long kBlasEntries = 8192;
+using FloatBlock = Eigen::Map<const Eigen::MatrixXf, 0, Eigen::OuterStride<>>;
+using FloatVector = Eigen::Map<Eigen::VectorXf>;
+
+// One supernode's block: its nscol x nscol lower-triangular diagonal block D and the nb = nsrow - nscol rows below
+// it, B, column-major with leading dimension nsrow.
+struct Block {
+  const float* values;
+  int nscol, nsrow;
+  [[nodiscard]] int below() const { return nsrow - nscol; }
+  [[nodiscard]] bool blas() const { return long(nscol) * nsrow >= kBlasEntries; }
+  [[nodiscard]] FloatBlock diagonal() const { return {values, nscol, nscol, Eigen::OuterStride<>(nsrow)}; }
+  [[nodiscard]] FloatBlock rows_below() const { return {values + nscol, below(), nscol, Eigen::OuterStride<>(nsrow)}; }
+  // y = D^-1 y (nscol).
+  void solve(float* y) const {
+    if (blas()) {
+      const int one = 1;
+      strsv_("L", "N", "N", &nscol, values, &nsrow, y, &one);
+    } else {
+      FloatVector yd(y, nscol);
+      diagonal().triangularView<Eigen::Lower>().solveInPlace(yd);
+    }
+  }
+  // y = D^-T y (nscol).
+  void solve_transposed(float* y) const {
+    if (blas()) {
+      const int one = 1;
+      strsv_("L", "T", "N", &nscol, values, &nsrow, y, &one);
+    } else {
+      FloatVector yd(y, nscol);
+      diagonal().transpose().triangularView<Eigen::Upper>().solveInPlace(yd);
+    }
+  }
+  // t = B y (nb = below(), y nscol).
+  void below_times(const float* y, float* t) const {
+    if (blas()) {
+      const int one = 1, nb = below();
+      const float f1 = 1.0f, f0 = 0.0f;
+      sgemv_("N", &nb, &nscol, &f1, values + nscol, &nsrow, y, &one, &f0, t, &one);
+    } else {
+      FloatVector(t, below()).noalias() = rows_below() * Eigen::Map<const Eigen::VectorXf>(y, nscol);
+    }
+  }
+  // y -= B^T t (y nscol, t nb).
+  void subtract_below_transposed(const float* t, float* y) const {
+    if (blas()) {
+      const int one = 1, nb = below();
+      const float f1 = 1.0f, fm1 = -1.0f;
+      sgemv_("T", &nb, &nscol, &fm1, values + nscol, &nsrow, t, &one, &f1, y, &one);
+    } else {
+      FloatVector(y, nscol).noalias() -= rows_below().transpose() * Eigen::Map<const Eigen::VectorXf>(t, below());
+    }
+  }
+};
 
 // The longer part's work after dealing the subtrees `pieces` (their work `sub`), heaviest first, each to the part
 // with less so far; `bins` receives each piece's part.
@@ -112,16 +175,14 @@ void SupernodalSolvePlan::build(const SupernodalStructure& L) {
 void SupernodalSolvePlan::forward_range(const SupernodalStructure& L, const float* values, float* y, int first,
                                         int last, int root, Part* part) {
   std::vector<float>& t = part ? part->t : m_t;
-  const int one = 1;
-  const float f1 = 1.0f, f0 = 0.0f;
   for (int sn = first; sn <= last; ++sn) {
-    int k1 = L.super[sn], nscol = L.super[sn + 1] - k1, nsrow = L.pi[sn + 1] - L.pi[sn];
-    const float* Ls = values + L.px[sn];
-    strsv_("L", "N", "N", &nscol, Ls, &nsrow, y + k1, &one);
-    int nb = nsrow - nscol;  // the rows below: t = L_below y_diag, then scattered
+    const int k1 = L.super[sn], nscol = L.super[sn + 1] - k1;
+    const Block b{values + L.px[sn], nscol, L.pi[sn + 1] - L.pi[sn]};
+    b.solve(y + k1);
+    const int nb = b.below();  // the rows below: t = B y_diag, then scattered
     if (nb == 0) continue;
     t.resize(std::size_t(nb));
-    sgemv_("N", &nb, &nscol, &f1, Ls + nscol, &nsrow, y + k1, &one, &f0, t.data(), &one);
+    b.below_times(y + k1, t.data());
     const int* r = L.rows + L.pi[sn] + nscol;
     if (part == nullptr) {
       for (int i = 0; i < nb; ++i) y[r[i]] -= t[std::size_t(i)];
@@ -139,19 +200,17 @@ void SupernodalSolvePlan::forward_range(const SupernodalStructure& L, const floa
 
 void SupernodalSolvePlan::backward_range(const SupernodalStructure& L, const float* values, float* y, int first,
                                          int last, std::vector<float>& t) {
-  const int one = 1;
-  const float f1 = 1.0f, fm1 = -1.0f;
   for (int sn = last; sn >= first; --sn) {
-    int k1 = L.super[sn], nscol = L.super[sn + 1] - k1, nsrow = L.pi[sn + 1] - L.pi[sn];
-    const float* Ls = values + L.px[sn];
-    int nb = nsrow - nscol;
-    if (nb > 0) {
+    const int k1 = L.super[sn], nscol = L.super[sn + 1] - k1;
+    const Block b{values + L.px[sn], nscol, L.pi[sn + 1] - L.pi[sn]};
+    const int nb = b.below();
+    if (nb > 0) {  // y_diag -= B^T y_below
       const int* r = L.rows + L.pi[sn] + nscol;
       t.resize(std::size_t(nb));
       for (int i = 0; i < nb; ++i) t[std::size_t(i)] = y[r[i]];
-      sgemv_("T", &nb, &nscol, &fm1, Ls + nscol, &nsrow, t.data(), &one, &f1, y + k1, &one);
+      b.subtract_below_transposed(t.data(), y + k1);
     }
-    strsv_("L", "T", "N", &nscol, Ls, &nsrow, y + k1, &one);
+    b.solve_transposed(y + k1);
   }
 }
 

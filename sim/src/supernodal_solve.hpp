@@ -2,7 +2,7 @@
 // Triangular solves with a supernodal Cholesky factor L (CHOLMOD's layout, single-precision values) on two threads.
 // Private to sim/src: the preconditioner's solves, which PCG applies once per iteration, are bound by the latency of
 // many small dense kernels, not by memory bandwidth (one core streams 20 GB/s here, the solves reach 9), so they gain
-// from a second core. The supernodal elimination tree is cut into disjoint subtrees, dealt to two parts of about
+// from a second core, and from kernels without a library call's overhead (Eigen's, inlined). The supernodal elimination tree is cut into disjoint subtrees, dealt to two parts of about
 // equal work, and the supernodes above them (the "top") are solved by one thread: in the forward solve after the
 // parts, in the backward solve before them.
 #include <array>

@@ -617,24 +617,34 @@ SpMat FemSystem::system_columns(double mc, double kc, const ElementFrame& frame,
   std::sort(elements.begin(), elements.end());
   elements.erase(std::unique(elements.begin(), elements.end()), elements.end());
   const Mat24& unit_k = m.unit_stiffness();
-  for (const int e : elements) {
-    const Mat3& R = frame.rotation[std::size_t(e)];
-    const double ks = kc * m.stiffness_scale()[std::size_t(e)];
-    const auto& g = im.gather[std::size_t(e)];
-    const int* off = im.pair_offsets.data() + im.pair_begin[std::size_t(e)];
-    for (std::size_t pi = 0; pi < g.size(); ++pi)
-      for (std::size_t qi = 0; qi < g.size(); ++qi) {
-        const int* o = off + 3 * (pi * g.size() + qi);
-        const int i = local[std::size_t(g[qi].dof)];
-        if (i < 0 || o[0] < 0) continue;  // not a column asked for, or a constrained row or column
-        const Mat3 B = (ks * g[pi].w * g[qi].w) * (R * unit_k.block<3, 3>(3 * g[pi].corner, 3 * g[qi].corner) *
-                                                     R.transpose());
-        for (int c = 0; c < 3; ++c) {
-          double* dst = val + o_outer[3 * i + c] + (o[c] - outer[3 * g[qi].dof + c]);
-          for (int r = 0; r < 3; ++r) dst[r] += B(r, c);
-        }
+  // On the executor's threads, each writing the columns of its own range of `dofs` (every element is visited by
+  // each, its blocks computed only for that thread's columns): each column's sum runs in element order, as on one
+  // thread, so the result does not depend on the thread count.
+  const int parts = std::max(1, std::min(im.executor_ptr->threads(), int(dofs.size())));
+  im.executor_ptr->parallel_for(parts, 1, [&](int tb, int te) {
+    for (int t = tb; t < te; ++t) {
+      const int lo = int(std::int64_t(dofs.size()) * t / parts), hi = int(std::int64_t(dofs.size()) * (t + 1) / parts);
+      for (const int e : elements) {
+        const Mat3& R = frame.rotation[std::size_t(e)];
+        const double ks = kc * m.stiffness_scale()[std::size_t(e)];
+        const auto& g = im.gather[std::size_t(e)];
+        const int* off = im.pair_offsets.data() + im.pair_begin[std::size_t(e)];
+        for (std::size_t pi = 0; pi < g.size(); ++pi)
+          for (std::size_t qi = 0; qi < g.size(); ++qi) {
+            const int* o = off + 3 * (pi * g.size() + qi);
+            const int i = local[std::size_t(g[qi].dof)];
+            // Not a column asked for, or another thread's; or a constrained row or column.
+            if (i < lo || i >= hi || o[0] < 0) continue;
+            const Mat3 B = (ks * g[pi].w * g[qi].w) *
+                           (R * unit_k.block<3, 3>(3 * g[pi].corner, 3 * g[qi].corner) * R.transpose());
+            for (int c = 0; c < 3; ++c) {
+              double* dst = val + o_outer[3 * i + c] + (o[c] - outer[3 * g[qi].dof + c]);
+              for (int r = 0; r < 3; ++r) dst[r] += B(r, c);
+            }
+          }
       }
-  }
+    }
+  });
   for (std::size_t i = 0; i < dofs.size(); ++i) {
     const int q = dofs[i];
     const double diag = constrained[std::size_t(q)] ? 1.0 : mc * m.dof_mass()[std::size_t(q)];

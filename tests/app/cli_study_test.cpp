@@ -197,6 +197,13 @@ TEST_F(CliStudyTest, RichardsonRefusesSequencesThatOscillateOrDiverge) {
   const json rows = read_json(dir / "study.json")["rows"];
   EXPECT_EQ(rows[2]["error"]["probes"]["tip"].get<double>(), 0.0);
   EXPECT_NEAR(rows[2]["error"]["probes"]["mid"].get<double>(), (0.05e-4 / 3.0) / -mid, 1e-9);
+  // tip's finest two runs agree exactly: the finest run, with no error, and said so.
+  ref = collect({-1.0e-3, -1.25e-3, -1.25e-3}, {-1.0e-4, -1.2e-4, -1.25e-4});
+  EXPECT_EQ(ref["extrapolated"], 1);
+  EXPECT_EQ(ref["estimated_error"]["tip"].get<double>(), 0.0);
+  said = false;
+  for (const json& n : ref["notes"]) said |= n.get<std::string>().find("agree exactly") != std::string::npos;
+  EXPECT_TRUE(said) << ref["notes"];
   // Both grow: no extrapolation anywhere, and the estimated errors are the last changes.
   ref = collect({-1.0e-3, -1.1e-3, -1.3e-3}, {-1.0e-4, -1.05e-4, -1.2e-4});
   EXPECT_EQ(ref["extrapolated"], 0);

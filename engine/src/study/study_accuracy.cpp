@@ -78,7 +78,8 @@ std::vector<const Row*> uniform_sequence(const std::vector<Row>& rows, const std
 // point the same way (d1 . d2 > 0) and shrink (|d1| > |d2|): then p = log2(|d1| / |d2|) and u = u2 + d2 / (2^p - 1),
 // and the estimated error of u2 is |u - u2| / |u|. Otherwise (the changes point opposite ways: the sequence
 // oscillates, and extrapolating along d2 would move away from the limit; or they grow) extrapolation is refused:
-// the finest run is the reference, and its estimated error is the last refinement's change |d2| / |u2|, never zero.
+// the finest run is the reference, and its estimated error is the last refinement's change |d2| / |u2| (zero only
+// when the finest two runs agree exactly).
 // With two levels p = 2 is assumed; with one the finest run is the reference and the error is unknown (null).
 // Returns the reference entry; "extrapolated" counts the probes that were.
 ojson richardson(const std::vector<const Row*>& seq, const std::string& element) {
@@ -103,11 +104,14 @@ ojson richardson(const std::vector<const Row*>& seq, const std::string& element)
         const double same_way = d1[0] * d2[0] + d1[1] * d2[1] + d1[2] * d2[2];
         const double ratio = norm(d1) / norm(d2);
         p = same_way > 0.0 && std::isfinite(ratio) && ratio > 1.0 ? std::clamp(std::log2(ratio), 0.5, 6.0) : NAN;
-        if (!std::isfinite(p))
+        if (norm(d2) == 0.0)
+          ref["notes"].push_back("probe " + name + ": the " + element +
+                                 " sequence's finest two runs agree exactly; the finest run is the reference");
+        else if (!std::isfinite(p))
           ref["notes"].push_back(
               "probe " + name + ": the " + element + " sequence " +
-              (same_way <= 0.0 && norm(d2) > 0.0 ? "oscillates (its last two changes point opposite ways)"
-                                                 : "does not converge (its last change is not the smaller)") +
+              (same_way <= 0.0 ? "oscillates (its last two changes point opposite ways)"
+                               : "does not converge (its last change is not the smaller)") +
               "; Richardson extrapolation is refused: the finest run is the reference, its estimated error the last "
               "refinement's change");
       }
@@ -116,7 +120,7 @@ ojson richardson(const std::vector<const Row*>& seq, const std::string& element)
         error = norm(sub(u, u2)) / norm(u);
         ++extrapolated;
       } else {
-        error = norm(d2) / norm(u2);
+        error = norm(d2) == 0.0 ? 0.0 : norm(d2) / norm(u2);
       }
     }
     if (n == 2) ref["notes"].push_back("two uniform levels only: order 2 assumed for probe " + name);

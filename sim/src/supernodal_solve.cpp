@@ -22,9 +22,9 @@ namespace {
 // than kBlasEntries entries use Eigen's kernels (SSE2 at -O2, inlined), the others BLAS: most supernodes have 3-24
 // columns, and for those a call to OpenBLAS's strsv and sgemv costs more than its arithmetic (a work buffer taken
 // under a lock that the two threads share, column loops of calls); the large ones near the root gain from its
-// AVX-512 kernels. The factor of meniscus_punch (7,053 columns, 1.27 million entries, 499 supernodes) is applied in
-// 0.26-0.30 ms instead of 0.55 ms; that of meniscus_rest at level 6 (34,050 columns) as fast as with BLAS alone, and
-// 12 % faster than with Eigen alone (docs/RESULTS.md).
+// AVX-512 kernels. The factor of meniscus_punch (7,053 columns, 1.27 million entries, 499 supernodes) is applied
+// in 0.26-0.30 ms instead of 0.35-0.55 ms; that of meniscus_rest at level 6 (34,050 columns) as fast as with BLAS
+// alone, and 12 % faster than with Eigen alone (docs/RESULTS.md).
 constexpr long kBlasEntries = 8192;
 using FloatBlock = Eigen::Map<const Eigen::MatrixXf, 0, Eigen::OuterStride<>>;
 using FloatVector = Eigen::Map<Eigen::VectorXf>;

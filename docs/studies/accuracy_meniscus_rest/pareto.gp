@@ -1,8 +1,8 @@
-set xrange [3.67314:10463.4]
-set yrange [0.0347071:1.34483]
+set xrange [1.01893:2052.41]
+set yrange [0.0324767:1.44048]
 set terminal pngcairo size 1280,860 font 'sans,10'
 set output out
-set title "Accuracy against cost: meniscus_rest\nreference: Richardson extrapolation (trilinear)" noenhanced
+set title "Accuracy against cost: meniscus_rest\nreference: finest uniform bbar run (Richardson refused)" noenhanced
 set logscale xy
 set grid
 set key top right

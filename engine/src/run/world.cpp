@@ -484,6 +484,10 @@ void World::Impl::record_state(Report& r) const {
   r.nonfinite = st.nonfinite;
   r.speed_limit = st.speed_limit;
   r.energy_rejections = st.energy_rejections;
+  r.energy_projections = st.energy_projections;
+  r.energy_shortened = st.energy_shortened;
+  r.energy_removed_j = st.energy_removed_j;
+  r.energy_unremoved_j = st.energy_unremoved_j;
   r.newton_unconverged = st.newton_unconverged;
   r.max_speed_m_s = st.max_speed;
   r.min_volume_ratio = st.min_volume_ratio;

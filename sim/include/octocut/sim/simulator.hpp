@@ -30,7 +30,9 @@ struct SimulatorOptions {
   int max_halvings = 4;                        ///< retries with half the step before giving up on a step
   /// Energy guard, relative: an attempt in which no handle moves and whose kinetic + elastic energy rises by more than
   /// the work of gravity and the rigid shapes (less what the contact penalty springs take up), plus energy_guard times
-  /// the largest of these energies, is rolled back and retried as two halves, except at the smallest dt; 0 turns it off.
+  /// the largest of these energies, is rolled back and retried as two halves, except at the smallest dt. An attempt
+  /// it accepts (within the tolerance, or at the smallest dt) that still gains energy has the gain taken out of its
+  /// kinetic energy (the free DOFs' velocities scaled down; StabilityStats::energy_projections). 0 turns both off.
   double energy_guard = 1e-3;
 };
 
@@ -42,6 +44,12 @@ struct StabilityStats {
   int speed_limit = 0;       ///< attempts rejected for exceeding max_speed
   int solver_failures = 0;   ///< attempts rejected because the linear solve did not converge or A was not SPD
   int energy_rejections = 0;  ///< attempts rejected because the energy rose without work put in
+  /// Accepted attempts whose energy gain (without work put in) was taken out of them, and the gains so removed, J;
+  /// what a shortened attempt could still not remove (moving contacts only) is energy_unremoved_j.
+  int energy_projections = 0;
+  int energy_shortened = 0;  ///< of those, attempts shortened first because the gain exceeded the kinetic energy
+  double energy_removed_j = 0.0;
+  double energy_unremoved_j = 0.0;
   int newton_unconverged = 0;  ///< static solves that stopped at max_iterations
   double max_speed = 0.0;    ///< largest DOF speed seen, m/s
   /// Smallest element volume ratio (det F at an element's centre, deformed over rest) at the start of a dynamic
@@ -160,12 +168,25 @@ class Simulator {
   // One implicit Euler attempt of length dt; false (state untouched) when it fails a guard.
   // `may_reject`: the energy guard may reject the attempt (not at the smallest dt).
   bool try_dynamic_step(double dt, bool may_reject);
-  // Whether the energy guard checks an attempt with handle targets `target` (see energy_holds).
-  [[nodiscard]] bool energy_guarded(bool may_reject, const std::vector<Vec3>& target) const;
-  // The energy guard at the committed state: with `check`, its test against the start's energy e0 (J) and positions
-  // x0 (num_dofs), with the rigid shapes' work and the penalty springs' change over the attempt (J); keeps the new
-  // state's rotations, forces and energy for the next step when it passes.
-  bool energy_holds(bool check, double e0, const std::vector<Vec3>& x0, double work, double penalty);
+  // Whether the energy balance of an attempt with handle targets `target` can be checked (see energy_holds): no
+  // handle moves and the start's energy is at hand.
+  [[nodiscard]] bool energy_measurable(const std::vector<Vec3>& target) const;
+  // The start's rotations, forces and energy where no earlier attempt computed them (see simulator.cpp).
+  void ensure_start_energy();
+  // The contacts' outcomes (m_outcomes) of an attempt of length dt from DOF velocities v0 (num_dofs) with increments
+  // dv (3 num_dofs), the rigid shapes' work through them and the change of the penalty springs' energy, J.
+  void contact_balance(double dt, const std::vector<Vec3>& v0, const VecX& dv, double& work, double& penalty);
+  // The energy guard at the committed state. With `measured`, the balance against the start's energy e0 (J) and
+  // positions x0 (num_dofs), with the rigid shapes' work and the penalty springs' change over the attempt (J): `gain`
+  // is the energy gained beyond the work put in, J, and with `may_reject` a gain beyond the guard's tolerance fails
+  // the attempt. Keeps the new state's rotations, forces and energy for the next step when it passes.
+  bool energy_holds(bool measured, bool may_reject, double e0, const std::vector<Vec3>& x0, double work,
+                    double penalty, double& gain);
+  // Takes an accepted attempt's energy gain (J, > 0) out of it (see simulator.cpp): from the free DOFs' kinetic
+  // energy, after shortening the step when the gain is larger. dt, e0, x0 as for energy_holds; v0 the start's
+  // velocities (num_dofs), dv the attempt's increments (3 num_dofs); work and penalty follow a shortened step.
+  void remove_energy_gain(double gain, double dt, double e0, const std::vector<Vec3>& x0, const std::vector<Vec3>& v0,
+                          const VecX& dv, double& work, double& penalty);
   // Velocity increments (3 num_dofs) that take the handle DOFs to their pose at t + dt, held in `target` (num_dofs).
   [[nodiscard]] VecX prescribed_increments(double dt, std::vector<Vec3>& target) const;
   // Assembles and solves the implicit Euler system for the velocity increment dv (3 num_dofs).

@@ -132,6 +132,10 @@ struct Report {
   bool finite = true;
   long recoveries = 0, failed_steps = 0, solver_failures = 0, nonfinite = 0, speed_limit = 0, newton_unconverged = 0;
   long energy_rejections = 0;  ///< step attempts the energy guard rolled back (solver.energy_guard)
+  long energy_projections = 0;     ///< accepted attempts whose energy gain was taken out (sim::StabilityStats)
+  long energy_shortened = 0;       ///< of those, attempts shortened first
+  double energy_removed_j = 0.0;   ///< J, the energy gains those took out
+  double energy_unremoved_j = 0.0; ///< J, gains larger than the kinetic energy left in place
   double max_speed_m_s = 0.0;
   double min_volume_ratio = 1.0;  ///< smallest element det F seen at the start of a step (dimensionless)
   double kinetic_j = 0.0, elastic_j = 0.0;

@@ -45,9 +45,10 @@ struct StabilityStats {
   int solver_failures = 0;   ///< attempts rejected because the linear solve did not converge or A was not SPD
   int energy_rejections = 0;  ///< attempts rejected because the energy rose without work put in
   /// Accepted attempts whose energy gain (without work put in) was taken out of them, and the gains so removed, J;
-  /// what a shortened attempt could still not remove (moving contacts only) is energy_unremoved_j.
+  /// energy_unremoved_j is what was left: gains within the guard's tolerance beyond the kinetic energy (the corotated
+  /// force is not quite the energy's gradient), and what a shortened attempt could not remove (moving contacts).
   int energy_projections = 0;
-  int energy_shortened = 0;  ///< of those, attempts shortened first because the gain exceeded the kinetic energy
+  int energy_shortened = 0;  ///< of those, attempts shortened first (a gain beyond the tolerance and the kinetic energy)
   double energy_removed_j = 0.0;
   double energy_unremoved_j = 0.0;
   int newton_unconverged = 0;  ///< static solves that stopped at max_iterations
@@ -179,14 +180,16 @@ class Simulator {
   // The energy guard at the committed state. With `measured`, the balance against the start's energy e0 (J) and
   // positions x0 (num_dofs), with the rigid shapes' work and the penalty springs' change over the attempt (J): `gain`
   // is the energy gained beyond the work put in, J, and with `may_reject` a gain beyond the guard's tolerance fails
-  // the attempt. Keeps the new state's rotations, forces and energy for the next step when it passes.
+  // the attempt; `scale` is the largest of the energies compared, J. Keeps the new state's rotations, forces and
+  // energy for the next step when it passes.
   bool energy_holds(bool measured, bool may_reject, double e0, const std::vector<Vec3>& x0, double work,
-                    double penalty, double& gain);
+                    double penalty, double& gain, double& scale);
   // Takes an accepted attempt's energy gain (J, > 0) out of it (see simulator.cpp): from the free DOFs' kinetic
-  // energy, after shortening the step when the gain is larger. dt, e0, x0 as for energy_holds; v0 the start's
-  // velocities (num_dofs), dv the attempt's increments (3 num_dofs); work and penalty follow a shortened step.
-  void remove_energy_gain(double gain, double dt, double e0, const std::vector<Vec3>& x0, const std::vector<Vec3>& v0,
-                          const VecX& dv, double& work, double& penalty);
+  // energy, after shortening the step when the gain is larger and `beyond` the guard's tolerance. dt, e0, x0 as for
+  // energy_holds; v0 the start's velocities (num_dofs), dv the attempt's increments (3 num_dofs); work and penalty
+  // follow a shortened step.
+  void remove_energy_gain(double gain, bool beyond, double dt, double e0, const std::vector<Vec3>& x0,
+                          const std::vector<Vec3>& v0, const VecX& dv, double& work, double& penalty);
   // Velocity increments (3 num_dofs) that take the handle DOFs to their pose at t + dt, held in `target` (num_dofs).
   [[nodiscard]] VecX prescribed_increments(double dt, std::vector<Vec3>& target) const;
   // Assembles and solves the implicit Euler system for the velocity increment dv (3 num_dofs).

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 
+#include "element_kernels.hpp"
 #include "octocut/sim/parallel.hpp"
 
 namespace octocut::sim {
@@ -219,7 +220,9 @@ struct FemSystem::Impl {
   // kc R K R^T v for element e's slot vector v (24), applied block-wise without forming R K R^T.
   Vec24 rotated_apply(int e, double kc, const Mat3& R, Vec24 v) const {
     for (int a = 0; a < 8; ++a) v.segment<3>(3 * a) = R.transpose() * v.segment<3>(3 * a);
-    const Vec24 kl = (kc * model().stiffness_scale()[std::size_t(e)]) * (model().unit_stiffness() * v);
+    Vec24 kv;
+    apply_stiffness24(model().unit_stiffness().data(), v.data(), kv.data());
+    const Vec24 kl = (kc * model().stiffness_scale()[std::size_t(e)]) * kv;
     Vec24 out;
     for (int a = 0; a < 8; ++a) out.segment<3>(3 * a) = R * kl.segment<3>(3 * a);
     return out;

@@ -4,6 +4,8 @@
 #include <array>
 #include <cmath>
 
+#include "element_kernels.hpp"
+
 namespace octocut::sim {
 
 namespace {
@@ -176,7 +178,8 @@ Vec24 corotated_displacement(const Mat3& R, const Vec24& x, const Vec24& X) {
 
 Vec24 corotated_force(const Mat24& K, const Mat3& R, const Vec24& x, const Vec24& X, double* energy) {
   const Vec24 local = corotated_displacement(R, x, X);
-  const Vec24 k = K * local;
+  Vec24 k;
+  apply_stiffness24(K.data(), local.data(), k.data());
   if (energy != nullptr) *energy = 0.5 * local.dot(k);
   Vec24 f;
   for (int a = 0; a < 8; ++a) f.segment<3>(3 * a) = -(R * k.segment<3>(3 * a));

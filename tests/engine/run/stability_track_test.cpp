@@ -28,6 +28,15 @@ const char* kCube = R"({
   "output": {"stability_track": true}
 })";
 
+// The stability study's twist: the bottom face fixed, the top face turned by 360 degrees about z in 0.1 s (90 degrees
+// per element layer), then held.
+const char* kTwistHandles =
+    R"(/object/handles=[{"box": {"min": [-0.001, -0.001, -0.001], "max": [0.011, 0.011, 1e-8]}},
+                        {"box": {"min": [-0.001, -0.001, 0.00999999], "max": [0.011, 0.011, 0.011]},
+                         "keyframes": [{"t": 0.025, "rotation_deg": [0, 0, 90]}, {"t": 0.05, "rotation_deg": [0, 0, 180]},
+                                       {"t": 0.075, "rotation_deg": [0, 0, 270]},
+                                       {"t": 0.1, "rotation_deg": [0, 0, 360]}]}])";
+
 class StabilityTrackTest : public test::TempDirTest {
  protected:
   Report run(const std::vector<std::string>& sets) {
@@ -72,11 +81,7 @@ TEST_F(StabilityTrackTest, TheEnergyGuardStopsAWoundUpCubeFromGainingEnergyWhenI
       "/solver/mode=\"dynamic\"", "/duration=0.11", "/solver/linear_solver=\"pcg\"", "/solver/tolerance=1e-6",
       "/object/material/young_modulus=1e6", "/object/material/poisson_ratio=0.499",
       "/object/material/element=\"bbar\"",
-      R"(/object/handles=[{"box": {"min": [-0.001, -0.001, -0.001], "max": [0.011, 0.011, 1e-8]}},
-                          {"box": {"min": [-0.001, -0.001, 0.00999999], "max": [0.011, 0.011, 0.011]},
-                           "keyframes": [{"t": 0.025, "rotation_deg": [0, 0, 90]}, {"t": 0.05, "rotation_deg": [0, 0, 180]},
-                                         {"t": 0.075, "rotation_deg": [0, 0, 270]},
-                                         {"t": 0.1, "rotation_deg": [0, 0, 360]}]}])"};
+      kTwistHandles};
   std::vector<std::string> off = twist;
   off.push_back("/solver/energy_guard=0");
   const Report without = run(off), with = run(twist);
@@ -101,11 +106,7 @@ TEST_F(StabilityTrackTest, AnAcceptedStepThatStillGainsEnergyGivesTheGainBack) {
   const std::vector<std::string> twist = {
       "/solver/mode=\"dynamic\"", "/duration=0.2", "/solver/dt=0.01", "/solver/linear_solver=\"pcg\"",
       "/solver/tolerance=1e-6", "/object/material/young_modulus=1e6", "/object/material/poisson_ratio=0.499",
-      R"(/object/handles=[{"box": {"min": [-0.001, -0.001, -0.001], "max": [0.011, 0.011, 1e-8]}},
-                          {"box": {"min": [-0.001, -0.001, 0.00999999], "max": [0.011, 0.011, 0.011]},
-                           "keyframes": [{"t": 0.025, "rotation_deg": [0, 0, 90]}, {"t": 0.05, "rotation_deg": [0, 0, 180]},
-                                         {"t": 0.075, "rotation_deg": [0, 0, 270]},
-                                         {"t": 0.1, "rotation_deg": [0, 0, 360]}]}])"};
+      kTwistHandles};
   std::vector<std::string> off = twist;
   off.push_back("/solver/energy_guard=0");
   const Report without = run(off), with = run(twist);

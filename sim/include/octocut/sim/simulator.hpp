@@ -31,8 +31,9 @@ struct SimulatorOptions {
   /// Energy guard, relative: an attempt in which no handle moves and whose kinetic + elastic energy rises by more than
   /// the work of gravity and the rigid shapes (less what the contact penalty springs take up), plus energy_guard times
   /// the largest of these energies, is rolled back and retried as two halves, except at the smallest dt. An attempt
-  /// it accepts (within the tolerance, or at the smallest dt) that still gains energy has the gain taken out of its
-  /// kinetic energy (the free DOFs' velocities scaled down; StabilityStats::energy_projections). 0 turns both off.
+  /// it accepts that still gains energy (beyond 1e-7 of that scale) has the gain taken out of its kinetic energy (the
+  /// free DOFs' velocities scaled down), after shortening the step where the gain is beyond the tolerance (at the
+  /// smallest dt) and the kinetic energy (StabilityStats::energy_projections). 0 turns both off.
   double energy_guard = 1e-3;
 };
 

@@ -294,7 +294,7 @@ TEST_F(CliStudyTest, StabilityMatrixJudgesEveryCell) {
   const auto r = run_octocut("study stability '" + kCube + "' --out '" + out.string() +
                              "' --jobs 2 --quiet --set '/study/young_modulus=[1e5]' --set '/study/poisson_ratio=[0.3]' "
                              "--set '/study/dt=[1e-2]' --set '/study/scenarios=[\"sag\",\"crush\",\"twist\",\"press\"]' "
-                             "--set /study/duration=0.1");
+                             "--set /study/duration=0.1 --set /solver/threads=1");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const json s = read_json(out / "stability.json");
   EXPECT_EQ(s["schema"], "octocut.stability/1");
@@ -324,7 +324,10 @@ TEST_F(CliStudyTest, StabilityMatrixJudgesEveryCell) {
                         "max_displacement_m", "energy_ok", "contact_work_j", "recoveries", "failed_steps", "volume_change", "cuts_skipped"})
     EXPECT_NE(std::find(cols.begin(), cols.end(), c), cols.end()) << c;
   expect_png(out / "stability.png");
-  EXPECT_NE(octocut::engine::read_file(out / "stability.md").find("press"), std::string::npos);
+  const std::string md = octocut::engine::read_file(out / "stability.md");
+  EXPECT_NE(md.find("press"), std::string::npos);
+  // The scene overrides are stated at the top, not only in the Reproduce line at the end.
+  EXPECT_LT(md.find("Scene overrides (`--set`), in every cell: `/solver/threads=1`."), md.find("Scenarios:"));
   // Without a plotter the tables are still written, with a warning.
   fs::remove(out / "stability.png");
   fs::remove(out / "stability.csv");

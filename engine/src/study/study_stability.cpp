@@ -161,8 +161,13 @@ std::string markdown(const Plan& plan, const std::vector<Cell>& cells, const std
   m << "# Stability matrix: " << fs::path(plan.scene).filename().string() << "\n\n"
     << "Uniform octree level " << s["level"] << ", " << num_text(s["duration"]) << " s simulated per cell (handles move "
     << "over the first half, then hold), dynamic. Object size (largest bounding-box edge) "
-    << num_text(plan.object_size_m) << " m.\n\n"
-    << "Scenarios: **sag** (clamped at x min, gravity), **crush** (z max pushed down by 95% of the height, z min "
+    << num_text(plan.object_size_m) << " m.\n\n";
+  if (!plan.sets.empty()) {
+    m << "Scene overrides (`--set`), in every cell:";
+    for (const std::string& set : plan.sets) m << " `" << set << "`";
+    m << ".\n\n";
+  }
+  m << "Scenarios: **sag** (clamped at x min, gravity), **crush** (z max pushed down by 95% of the height, z min "
        "fixed), **twist** (z max turned 360° about z, z min fixed), **punch** (100 cylinder bites at one spot, each "
        "0.5% of the height deeper), **press** (a kinematic rigid plate wider than the object, from touching the top face "
        "down by 50% of the height, z min fixed; penalty contact with the scene's friction; contact starts in the "

@@ -505,8 +505,8 @@ void Simulator::remove_energy_gain(double gain, bool beyond, double dt, double e
   if (beyond && gain > free_kinetic()) {
     const std::vector<Vec3> v1 = m_state.v;
     VecX dv_theta = dv;
-    for (int k = 1; k <= 7 && gain > free_kinetic(); ++k) {
-      const double theta = k == 7 ? 0.0 : std::ldexp(1.0, -k);
+    for (int halvings = 1; halvings <= 7 && gain > free_kinetic(); ++halvings) {
+      const double theta = halvings == 7 ? 0.0 : std::ldexp(1.0, -halvings);  // 1/2 ... 1/64, then 0
       for (int d = 0; d < nd; ++d) {
         if (m_constrained[std::size_t(d)]) continue;
         m_state.v[std::size_t(d)] = theta * v1[std::size_t(d)];

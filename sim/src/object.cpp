@@ -265,7 +265,7 @@ ObjectModel ObjectModel::with_params(const MaterialParams& p) const {
   ObjectModel m = *this;
   m.m_params = p;
   m.m_revision = m_revision + 1;
-  m.m_unit_k = unit_hex_stiffness(p.poisson_ratio);
+  m.m_unit_k = unit_hex_stiffness(p.poisson_ratio, p.element);
   // Stiffness scale E phi h and lumped mass rho phi h^3 / 8 per slot, as finish() computes them.
   for (int e = 0; e < num_elements(); ++e)
     m.m_k_scale[std::size_t(e)] = p.young_modulus * m_occupancy[std::size_t(e)] * m_edge[std::size_t(e)];

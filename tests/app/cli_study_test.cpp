@@ -328,6 +328,8 @@ TEST_F(CliStudyTest, StabilityMatrixJudgesEveryCell) {
   EXPECT_NE(md.find("press"), std::string::npos);
   // The scene overrides are stated at the top, not only in the Reproduce line at the end.
   EXPECT_LT(md.find("Scene overrides (`--set`), in every cell: `/solver/threads=1`."), md.find("Scenarios:"));
+  // So is the element every cell ran with (the scene's, after the overrides: the default B-bar here).
+  EXPECT_LT(md.find("Hexahedra: **B-bar** (`object.material.element` \"bbar\")."), md.find("Scenarios:"));
   // Without a plotter the tables are still written, with a warning.
   fs::remove(out / "stability.png");
   fs::remove(out / "stability.csv");

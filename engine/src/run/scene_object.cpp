@@ -57,6 +57,13 @@ std::vector<sim::TriMesh> load_render_props(const Scene& scene) {
   return meshes;
 }
 
+sim::MaterialParams material_params(const Material& material) {
+  sim::MaterialParams p{material.young_modulus, material.poisson_ratio, material.density, material.rayleigh_mass,
+                        material.rayleigh_stiffness};
+  p.element = material.element == "trilinear" ? sim::HexFormulation::trilinear : sim::HexFormulation::bbar;
+  return p;
+}
+
 SceneObject build_scene_object(const Scene& scene, bool cuttable) {
   step_count(scene);
   const ObjectSettings& o = scene.object;
@@ -131,9 +138,7 @@ SceneObject build_scene_object(const Scene& scene, bool cuttable) {
     for (const HandleKeyframe& k : h.keyframes) hs.keyframes.push_back({k.t, to_vec3(k.translation), to_vec3(k.rotation_deg)});
     handles.push_back(std::move(hs));
   }
-  sim::MaterialParams params{o.material.young_modulus, o.material.poisson_ratio, o.material.density,
-                             o.material.rayleigh_mass, o.material.rayleigh_stiffness};
-  params.element = o.material.element == "bbar" ? sim::HexFormulation::bbar : sim::HexFormulation::trilinear;
+  const sim::MaterialParams params = material_params(o.material);
   sim::ObjectModel model = [&] {
     try {
       return sim::ObjectModel::build(spec, material, params, std::move(handles));

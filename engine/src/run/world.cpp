@@ -578,12 +578,7 @@ void World::hold_tool(std::size_t tool) {
 }
 
 void World::set_material(const Material& material) {
-  sim::MaterialParams p;
-  p.young_modulus = material.young_modulus;
-  p.poisson_ratio = material.poisson_ratio;
-  p.density = material.density;
-  p.rayleigh_mass = material.rayleigh_mass;
-  p.rayleigh_stiffness = material.rayleigh_stiffness;
+  const sim::MaterialParams p = material_params(material);  // the element too: a B-bar object stays B-bar
   // with_params checks the ranges before anything changes; an object cut away has no model to change.
   sim::ObjectModel next = m->sim->model().with_params(p);
   if (!m->sim->empty()) m->sim->set_model(std::move(next));

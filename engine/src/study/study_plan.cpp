@@ -259,7 +259,7 @@ Plan plan_stability(const Scene& scene, const std::map<std::string, ojson>& stud
   const double slab = scene.object.surface_is_box ? 1e-6 * plan.object_size_m : 0.1 * plan.object_size_m;
   plan.settings = {{"young_modulus", E}, {"poisson_ratio", nu}, {"dt", dt},        {"scenarios", scenarios},
                    {"level", level},     {"duration", T},       {"bounds", {lo, hi}},
-                   {"skipped_scenarios", ojson::object()}};
+                   {"skipped_scenarios", ojson::object()}, {"element", scene.object.material.element}};
   for (const std::string& s : scenarios) {
     for (double e : E) {
       for (double n : nu) {

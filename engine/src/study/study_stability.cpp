@@ -161,7 +161,11 @@ std::string markdown(const Plan& plan, const std::vector<Cell>& cells, const std
   m << "# Stability matrix: " << fs::path(plan.scene).filename().string() << "\n\n"
     << "Uniform octree level " << s["level"] << ", " << num_text(s["duration"]) << " s simulated per cell (handles move "
     << "over the first half, then hold), dynamic. Object size (largest bounding-box edge) "
-    << num_text(plan.object_size_m) << " m.\n\n";
+    << num_text(plan.object_size_m) << " m.";
+  if (s.contains("element"))  // plans written before the key have none
+    m << " Hexahedra: **" << (s["element"] == "trilinear" ? "trilinear" : "B-bar") << "** (`object.material.element` "
+      << s["element"].dump() << ").";
+  m << "\n\n";
   if (!plan.sets.empty()) {
     m << "Scene overrides (`--set`), in every cell:";
     for (const std::string& set : plan.sets) m << " `" << set << "`";

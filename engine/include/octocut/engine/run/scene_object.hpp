@@ -46,6 +46,9 @@ inline sim::Vec3 to_vec3(const std::array<double, 3>& a) { return {a[0], a[1], a
 /// A scene's box as a sim box, m.
 inline sim::Box3 to_box3(const SceneBox& b) { return {to_vec3(b.min), to_vec3(b.max)}; }
 
+/// The simulation's material parameters of a scene's material (same units), its hexahedron formulation included.
+sim::MaterialParams material_params(const Material& material);
+
 /// True when some tool of the scene has cut events on its timeline.
 bool scene_cuts(const Scene& scene);
 

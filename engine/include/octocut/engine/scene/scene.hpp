@@ -42,7 +42,7 @@ struct Material {
   double density = 1000.0;         ///< rho, kg/m^3
   double rayleigh_mass = 0.0;      ///< alpha, 1/s
   double rayleigh_stiffness = 0.0; ///< beta, s
-  std::string element = "trilinear";  ///< hexahedron formulation: "trilinear" or "bbar"
+  std::string element = "bbar";  ///< hexahedron formulation: "bbar" (the default) or "trilinear"
 };
 
 /// How the simulation octree is built (`object.octree`).

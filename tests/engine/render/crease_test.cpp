@@ -51,9 +51,11 @@ TEST(CreaseTest, AWideAngleKeepsTheSurfaceWhole) {
   EXPECT_EQ(topo.vertex_of.size(), box.vertices.size());
   // A box corner then averages its three faces' area-weighted normals: the diagonal.
   const RenderMesh mesh = crease_mesh(topo, box.vertices, {});
-  for (std::size_t r = 0; r < topo.vertex_of.size(); ++r)
-    if (box.vertices[std::size_t(topo.vertex_of[r])].isZero())
+  for (std::size_t r = 0; r < topo.vertex_of.size(); ++r) {
+    if (box.vertices[std::size_t(topo.vertex_of[r])].isZero()) {
       EXPECT_LT((mesh.normals[r] + Eigen::Vector3f::Ones().normalized()).norm(), 1e-6f);
+    }
+  }
 }
 
 TEST(CreaseTest, ACutFaceNeverSharesANormalWithAnUncutOne) {
@@ -65,9 +67,12 @@ TEST(CreaseTest, ACutFaceNeverSharesANormalWithAnUncutOne) {
   EXPECT_EQ(topo.vertex_of.size(), box.vertices.size() + 4 * kCells);
   const RenderMesh mesh = crease_mesh(topo, box.vertices, cut);
   EXPECT_EQ(mesh.cut.size(), cut.size());
-  for (std::size_t f = 0; f < box.triangles.size(); ++f)
-    if (cut[f])
-      for (std::int32_t r : mesh.triangles[f]) EXPECT_LT((mesh.normals[std::size_t(r)] - Eigen::Vector3f::UnitZ()).norm(), 1e-6f);
+  for (std::size_t f = 0; f < box.triangles.size(); ++f) {
+    if (!cut[f]) continue;
+    for (std::int32_t r : mesh.triangles[f]) {
+      EXPECT_LT((mesh.normals[std::size_t(r)] - Eigen::Vector3f::UnitZ()).norm(), 1e-6f);
+    }
+  }
 }
 
 TEST(CreaseTest, NormalsFollowTheDeformedPositions) {

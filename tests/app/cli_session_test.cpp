@@ -31,8 +31,9 @@ std::string without_timings(const json& report) { return test::report_without_ti
 class CliSessionTest : public test::TempDirTest {
  protected:
   // The meniscus punch scene without drawing and without contact, its paths absolute, copied into the test folder.
-  fs::path meniscus() const {
+  fs::path meniscus(const std::string& element = "") const {
     json scene = read_json(std::string(OCTOCUT_SOURCE_DIR) + "/assets/scenes/meniscus_punch.json");
+    if (!element.empty()) scene["object"]["material"]["element"] = element;
     const std::string meshes = std::string(OCTOCUT_SOURCE_DIR) + "/assets/meshes/";
     scene.erase("expected");
     scene["object"]["surface"] = meshes + "meniscus_10k.ply";
@@ -40,7 +41,7 @@ class CliSessionTest : public test::TempDirTest {
     scene["render"]["enabled"] = false;
     scene["render"]["props"] = json::array();
     scene["tools"][0]["collide"] = false;  // the punch cuts where it is put, without pushing the rim away first
-    return write("meniscus.json", scene.dump(1));
+    return write("meniscus" + element + ".json", scene.dump(1));
   }
 
   // A session by hand: the punch taken in hand, moved to where the scene's first cut punches, a cut at step 5, the
@@ -127,6 +128,28 @@ TEST_F(CliSessionTest, MaterialEditChangesTheMotion) {
   EXPECT_NE(probe("with"), probe("without"));
 }
 
+TEST_F(CliSessionTest, MaterialEditsCarryTheElementAndSessionsWithoutItKeepTheObjects) {
+  // The scene with trilinear hexahedra (not the default). The edit at step 6 is recorded with the element; a session
+  // written before edits recorded it (no "element" key) replays with the object's element unchanged, exactly as the
+  // same edit naming it; an edit to B-bar moves the tissue differently.
+  const fs::path scene = meniscus("trilinear");
+  const json recorded = json::parse(engine::session_json(session(scene)));
+  ASSERT_EQ(recorded["events"][3]["material"]["element"], "trilinear");
+  json old_format = recorded, bbar = recorded;
+  old_format["events"][3]["material"].erase("element");
+  bbar["events"][3]["material"]["element"] = "bbar";
+  auto report = [&](const std::string& name, const json& session) {
+    const fs::path file = write(name + ".json", session.dump(1));
+    const CommandResult r = run_octocut("run '" + scene.string() + "' --replay '" + file.string() +
+                                        "' --no-render --quiet --out '" + (m_dir / name).string() + "'");
+    EXPECT_EQ(r.exit_code, 0) << r.output;
+    return read_json(m_dir / name / "report.json");
+  };
+  const json a = report("recorded", recorded), b = report("old_format", old_format), c = report("bbar", bbar);
+  EXPECT_EQ(without_timings(a), without_timings(b));
+  EXPECT_NE(a["probes"]["body_periphery"]["displacement"], c["probes"]["body_periphery"]["displacement"]);
+}
+
 TEST_F(CliSessionTest, BadSessionFilesExitTwoNamingTheFileAndPointer) {
   const fs::path scene = meniscus();
   json good = json::parse(engine::session_json(session(scene)));
@@ -135,12 +158,13 @@ TEST_F(CliSessionTest, BadSessionFilesExitTwoNamingTheFileAndPointer) {
     std::string text;
     std::string expected;  // in the message, after the file name
   };
-  json schema = good, rotation = good, kind = good, order = good, missing = good;
+  json schema = good, rotation = good, kind = good, order = good, missing = good, element = good;
   schema["schema"] = "octocut.session/99";
   rotation["events"][1]["pose"]["rotation"][0] = {2.0, 0.0, 0.0};
   kind["events"][2]["kind"] = "teleport";
   order["events"][2]["step"] = 1;
   missing["events"][3].erase("material");
+  element["events"][3]["material"]["element"] = "q8";
   const std::vector<Case> cases = {
       {"notjson", "{\"schema\": ", ": /: not JSON"},
       {"schema", schema.dump(), ": /schema: "},
@@ -148,6 +172,7 @@ TEST_F(CliSessionTest, BadSessionFilesExitTwoNamingTheFileAndPointer) {
       {"kind", kind.dump(), ": /events/2/kind: unknown event kind 'teleport'"},
       {"order", order.dump(), ": /events/2/step: steps go back"},
       {"missing", missing.dump(), ": /events/3/material: missing"},
+      {"element", element.dump(), ": /events/3/material/element: must be \"bbar\" or \"trilinear\""},
   };
   for (const Case& c : cases) {
     const fs::path file = write(c.name + ".json", c.text);

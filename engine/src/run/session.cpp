@@ -33,6 +33,7 @@ class Reader {
     if (!m_j.is_object()) fail(m_file, at(), "expected an object");
   }
   [[nodiscard]] std::string at(const std::string& key = "") const { return key.empty() ? (m_pointer.empty() ? "/" : m_pointer) : m_pointer + "/" + key; }
+  [[nodiscard]] bool has(const std::string& key) const { return m_j.contains(key); }
   const json& get(const std::string& key) const {
     if (!m_j.contains(key)) fail(m_file, at(key), "missing");
     return m_j.at(key);
@@ -98,8 +99,10 @@ sim::Pose parse_pose(const Reader& r) {
 }
 
 json material_json(const Material& m) {
-  return {{"young_modulus", m.young_modulus}, {"poisson_ratio", m.poisson_ratio}, {"density", m.density},
-          {"rayleigh_mass", m.rayleigh_mass}, {"rayleigh_stiffness", m.rayleigh_stiffness}};
+  json j = {{"young_modulus", m.young_modulus}, {"poisson_ratio", m.poisson_ratio}, {"density", m.density},
+            {"rayleigh_mass", m.rayleigh_mass}, {"rayleigh_stiffness", m.rayleigh_stiffness}};
+  if (!m.element.empty()) j["element"] = m.element;
+  return j;
 }
 
 Material parse_material(const Reader& r) {
@@ -114,6 +117,12 @@ Material parse_material(const Reader& r) {
   if (m.density <= 0.0) fail(r.file(), r.at("density"), "must be > 0");
   if (m.rayleigh_mass < 0.0) fail(r.file(), r.at("rayleigh_mass"), "must be >= 0");
   if (m.rayleigh_stiffness < 0.0) fail(r.file(), r.at("rayleigh_stiffness"), "must be >= 0");
+  // The element: sessions written before it was recorded have none, and their edits keep the object's element.
+  m.element.clear();
+  if (r.has("element")) {
+    m.element = r.string("element");
+    if (m.element != "bbar" && m.element != "trilinear") fail(r.file(), r.at("element"), "must be \"bbar\" or \"trilinear\"");
+  }
   return m;
 }
 

@@ -413,6 +413,11 @@ void Viewer::panel_controls(const SimStats& s) {
     edited |= ImGui::IsItemDeactivatedAfterEdit();
     ImGui::InputDouble("beta (s)", &m_material_edit.rayleigh_stiffness, 0.0, 0.0, "%.4g");
     edited |= ImGui::IsItemDeactivatedAfterEdit();
+    int element = m_material_edit.element == "trilinear" ? 1 : 0;  // the hexahedron (object.material.element)
+    if (ImGui::Combo("element", &element, "bbar\0trilinear\0")) {
+      m_material_edit.element = element == 1 ? "trilinear" : "bbar";
+      edited = true;
+    }
     if (edited) m_runner.set_material(m_material_edit);
     if (ImGui::Button("revert")) m_material_edit = s.material;
   }

@@ -26,7 +26,7 @@ enum class SessionEventKind {
   hold,      ///< the tool was taken in hand (World::hold_tool)
   pose,      ///< the tool in hand moved (World::set_tool_pose)
   cut,       ///< a cut now with that tool (World::cut_now)
-  material,  ///< E, nu or damping edited (World::set_material)
+  material,  ///< E, nu, damping or the element edited (World::set_material)
   pause,     ///< the simulation was paused (no effect on the simulation; kept for reading)
   resume,    ///< ... and resumed
   reset,     ///< the world was rebuilt from the scene
@@ -39,7 +39,8 @@ struct SessionEvent {
   double t = 0.0;      ///< simulated time then, s (informative; `step` decides)
   std::size_t tool = 0;  ///< hold, pose, cut: the tool's index in the scene
   sim::Pose pose;        ///< pose: tool coordinates to world
-  Material material;     ///< material: the whole material after the edit
+  Material material;     ///< material: the whole material after the edit (element empty in sessions recorded
+                         ///< before it was: the object's element stays)
 };
 
 /// A recorded session.

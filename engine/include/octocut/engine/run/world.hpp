@@ -111,9 +111,10 @@ class World {
   /// The index of the tool named `name`, or nullopt.
   [[nodiscard]] std::optional<std::size_t> tool_index(const std::string& name) const;
 
-  /// Changes the object's material from now on (E, nu, density, Rayleigh damping): the model gets a new revision
-  /// with the same leaves and DOFs, the state carries over. Throws std::invalid_argument for values outside the
-  /// scene schema's ranges (E > 0, 0 <= nu < 0.5, density > 0, damping >= 0), leaving the world untouched.
+  /// Changes the object's material from now on (E, nu, density, Rayleigh damping, the element; an empty element
+  /// keeps the object's): the model gets a new revision with the same leaves and DOFs, the state carries over.
+  /// Throws std::invalid_argument for values outside the scene schema's ranges (E > 0, 0 <= nu < 0.5, density > 0,
+  /// damping >= 0, element "bbar" or "trilinear"), leaving the world untouched.
   void set_material(const Material& material);
   /// The object's material now (the scene's, or the last set_material).
   [[nodiscard]] const Material& material() const;

@@ -229,6 +229,7 @@ class Simulator {
   struct StepStart;  ///< what the energy guard computed at a state, for the step that starts from it (simulator.cpp)
   std::unique_ptr<StepStart> m_next_start;
   double m_energy = 0.0;  ///< J, kinetic + elastic energy of the state of version m_energy_version (energy guard)
+  double m_energy_peak = 0.0;  ///< J, the largest of those since the last set_state: the guard's energy scale
   std::uint64_t m_energy_version = ~std::uint64_t(0);
   StepProfile m_profile;
   std::unique_ptr<Executor> m_executor;

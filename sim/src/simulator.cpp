@@ -465,17 +465,17 @@ bool Simulator::energy_holds(bool measured, bool may_reject, double e0, const st
     for (int d = 0; d < m_model.num_dofs(); ++d)
       gravity_work +=
           m_model.dof_mass()[std::size_t(d)] * m_options.gravity.dot(m_state.x[std::size_t(d)] - x0[std::size_t(d)]);
-    // The scale is the run's: the largest energy since the state was set, not only this step's. A system that has
-    // come to rest holds energies at the rounding floor of its positions (1e-30 of its start's and below), whose
-    // step-to-step noise would otherwise be rejected and halved down to the smallest dt, step after step.
-    m_energy_peak = std::max({m_energy_peak, e0, e1});
-    scale = std::max({m_energy_peak, std::abs(work), std::abs(gravity_work), std::abs(penalty)});
+    scale = std::max({e0, e1, std::abs(work), std::abs(gravity_work), std::abs(penalty)});
     gain = e1 + penalty - e0 - work - gravity_work;
-    if (may_reject && gain > m_options.energy_guard * scale) return false;
     // Below this the gain is the noise of the energy sums and of a corotated force that is not quite the energy's
     // gradient (meniscus_punch_hd at rest: 1e-13 to 2e-9 of the scale); left alone. The study's criterion is 1e-6.
+    // Noise is measured against the run's energy too, the largest since the state was set: a system come to rest
+    // holds energies at the rounding floor of its positions (1e-30 of its start's), whose step-to-step noise would
+    // otherwise be rejected and halved down to the smallest dt, step after step.
     constexpr double kEnergyNoise = 1e-7;
-    if (gain <= kEnergyNoise * scale) gain = 0.0;
+    m_energy_peak = std::max({m_energy_peak, e0, e1});
+    if (gain <= kEnergyNoise * std::max(scale, m_energy_peak)) gain = 0.0;
+    if (may_reject && gain > m_options.energy_guard * scale) return false;
   }
   next->version = m_state_version;
   m_next_start = std::move(next);

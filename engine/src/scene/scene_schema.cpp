@@ -253,7 +253,8 @@ Entry make_scene_schema() {
                  "Energy guard, relative: a step in which no handle moves and whose kinetic + elastic energy rises by "
                  "more than the work of gravity and the rigid shapes (less what the contact penalty springs take up), "
                  "plus this fraction of the largest of those energies, is rolled back and retried as two halves (not "
-                 "at the smallest step). A step it accepts that still gains energy (beyond 1e-7 of that scale) gives "
+                 "at the smallest step). A step it accepts that still gains energy (beyond 1e-7 of that scale and of "
+                 "the largest energy since the start: below is noise) gives "
                  "the gain back: out of the kinetic energy, the step shortened first where that is not enough "
                  "(report `stability.energy_projections`). 0 turns both off."),
       },

@@ -30,8 +30,9 @@ struct SimulatorOptions {
   int max_halvings = 4;                        ///< retries with half the step before giving up on a step
   /// Energy guard, relative: an attempt in which no handle moves and whose kinetic + elastic energy rises by more than
   /// the work of gravity and the rigid shapes (less what the contact penalty springs take up), plus energy_guard times
-  /// the largest of these energies, is rolled back and retried as two halves, except at the smallest dt. An attempt
-  /// it accepts that still gains energy (beyond 1e-7 of that scale) has the gain taken out of its kinetic energy (the
+  /// the largest of these energies, is rolled back and retried as two halves, except at the smallest dt. A gain below
+  /// 1e-7 of that scale and of the largest kinetic + elastic energy since the last set_state is noise. An attempt
+  /// it accepts that still gains energy beyond that has the gain taken out of its kinetic energy (the
   /// free DOFs' velocities scaled down), after shortening the step where the gain is beyond the tolerance (at the
   /// smallest dt) and the kinetic energy (StabilityStats::energy_projections). 0 turns both off.
   double energy_guard = 1e-3;

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 #include <string>
 
 #include "octocut/cutting/material_mesher.hpp"
@@ -60,6 +61,8 @@ std::vector<sim::TriMesh> load_render_props(const Scene& scene) {
 sim::MaterialParams material_params(const Material& material) {
   sim::MaterialParams p{material.young_modulus, material.poisson_ratio, material.density, material.rayleigh_mass,
                         material.rayleigh_stiffness};
+  if (material.element != "bbar" && material.element != "trilinear")
+    throw std::invalid_argument("element must be \"bbar\" or \"trilinear\", not \"" + material.element + "\"");
   p.element = material.element == "trilinear" ? sim::HexFormulation::trilinear : sim::HexFormulation::bbar;
   return p;
 }

@@ -580,10 +580,7 @@ void World::hold_tool(std::size_t tool) {
 void World::set_material(const Material& edit) {
   Material material = edit;
   if (material.element.empty()) material.element = m->scene.object.material.element;  // unnamed: kept
-  if (material.element != "bbar" && material.element != "trilinear")
-    throw std::invalid_argument("World::set_material: element must be \"bbar\" or \"trilinear\", not \"" +
-                                material.element + "\"");
-  const sim::MaterialParams p = material_params(material);  // the element too: a B-bar object stays B-bar
+  const sim::MaterialParams p = material_params(material);  // the element too (checked): B-bar stays B-bar
   // with_params checks the ranges before anything changes; an object cut away has no model to change.
   sim::ObjectModel next = m->sim->model().with_params(p);
   if (!m->sim->empty()) m->sim->set_model(std::move(next));

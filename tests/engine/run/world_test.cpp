@@ -280,6 +280,10 @@ TEST_F(WorldTest, MaterialEditsApplyFromNowOnAndBadOnesChangeNothing) {
   Material bad = world.material();
   bad.poisson_ratio = 0.5;
   EXPECT_THROW(world.set_material(bad), std::invalid_argument);
+  Material q8 = world.material();
+  q8.element = "q8";
+  EXPECT_THROW(world.set_material(q8), std::invalid_argument);
+  EXPECT_EQ(world.material().element, "bbar");
   EXPECT_EQ(world.material().poisson_ratio, 0.45);
   EXPECT_EQ(world.simulator().model().params().poisson_ratio, 0.45);
 }

@@ -26,7 +26,7 @@ struct MaterialParams {
   double density = 1000.0;         ///< rho, kg/m^3
   double rayleigh_mass = 0.0;      ///< alpha, 1/s
   double rayleigh_stiffness = 0.0; ///< beta, s
-  HexFormulation element = HexFormulation::bbar;  ///< the hexahedron's strain interpolation (B-bar by default: docs/RESULTS.md, "B-bar by default")
+  HexFormulation element = HexFormulation::bbar;  ///< the hexahedron's strain interpolation (RESULTS: "B-bar by default")
 };
 
 /// A rest-space box whose DOFs follow a keyframed rigid motion (fixed without keyframes).

@@ -47,6 +47,7 @@ inline sim::Vec3 to_vec3(const std::array<double, 3>& a) { return {a[0], a[1], a
 inline sim::Box3 to_box3(const SceneBox& b) { return {to_vec3(b.min), to_vec3(b.max)}; }
 
 /// The simulation's material parameters of a scene's material (same units), its hexahedron formulation included.
+/// Throws std::invalid_argument for an element other than "bbar" or "trilinear".
 sim::MaterialParams material_params(const Material& material);
 
 /// True when some tool of the scene has cut events on its timeline.

@@ -189,7 +189,8 @@ std::pair<Result, int> perturbing(sim::TriMesh& blade, Cut&& cut_with) {
 
 double blade_shift_fraction(int attempt) {
   // The third shift (0.1 um on a 1 cm punch) gets a re-cut away from walls it meets exactly, where the two smaller
-  // ones leave a configuration the rounding repair cannot mend (one bite of 8,000 in the stability matrix).
+  // ones leave a configuration the rounding repair cannot mend (one bite of 8,000 in the stability matrix once; the
+  // repair has mended that one since, and the matrix uses no third shift).
   constexpr double kShift[kBladeShiftAttempts + 1] = {0.0, 1e-9, 1e-7, 1e-5};
   return attempt >= 0 && attempt <= kBladeShiftAttempts ? kShift[attempt] : 0.0;
 }

@@ -206,14 +206,21 @@ struct PieceMesh {
   }
 };
 
-/// Phase 3a: the exact result rounded to doubles, made valid again where the rounding broke it. Pieces that the
-/// rounding made degenerate (three exactly collinear corners), that intersect another piece or an unchanged
-/// neighbour of S (exact predicates on the rounded coordinates), or that have an edge shorter than `tiny_edge` (m) at a
-/// new node, are repaired by collapsing a new node along one of their edges onto its other end, shortest edge first.
-/// A collapse is made only when it keeps the pieces closed and manifold (the link condition, S's unchanged faces
-/// around the target included), makes no piece degenerate or turns none over, and makes no piece intersect any other
-/// or an unchanged neighbour (exact tests). Rounds until nothing is found; returns the number of collapses. Throws
-/// CutFailure when a defect is left that no collapse can mend. `grid` is S's grid (S not yet edited).
+/// Phase 3a: the exact result rounded to doubles, made valid again where the rounding broke it, and cleaned of what
+/// is finer than `tiny_edge` (m). Pieces that the rounding made degenerate (three exactly collinear corners) or that
+/// intersect another piece or an unchanged neighbour of S (exact predicates on the rounded coordinates) are defects;
+/// pieces with an edge shorter than `tiny_edge` at a new node, and pieces narrower than it (height over the longest
+/// edge: caps and needles), are small. Each is mended by collapsing a new node along one of its edges onto its other
+/// end, shortest edge first; for a small piece only where the surface moves by less than `tiny_edge` (the node's
+/// distance from every moved piece's plane). A collapse is made only when it keeps the pieces closed and manifold
+/// (the link condition, S's unchanged faces around the target included), makes no piece degenerate or turns none
+/// over, and makes no piece intersect any other or an unchanged neighbour (exact tests). A defect that no single
+/// collapse mends then loses a twin (a piece on the same three nodes turned the other way: a sliver bubble; both go)
+/// or has its cluster collapsed at once (its nodes and those tiny edges join to them, checked after all moved, rolled
+/// back otherwise); a narrow piece that no collapse mends has its longest edge flipped when that raises the smaller
+/// angle of the two pieces and intersects nothing (a vertex of S a hair off a new edge). Rounds until nothing is
+/// found; returns the number of edits. Throws CutFailure when a defect is left that nothing mends. `grid` is S's grid
+/// (S not yet edited).
 int repair_rounding(PieceMesh& mesh, FaceGrid& grid, double tiny_edge);
 
 // ---- Phase 4: verification (surface_cut_verify.cpp, CGAL predicates) ----

@@ -13,6 +13,8 @@
 #include <cstdint>
 #include <iterator>
 #include <limits>
+#include <map>
+#include <tuple>
 #include <unordered_map>
 #include <string>
 #include <utility>
@@ -277,7 +279,8 @@ bool triangles_intersect(const sim::TriMesh& m, const Tri& s, const Tri& t) {
 // The state of repair_rounding: the pieces, which pieces each node is in, and S's faces near a box.
 class Repair {
  public:
-  Repair(PieceMesh& mesh, FaceGrid& grid, double tiny_edge) : m_(mesh), grid_(grid), tiny2_(tiny_edge * tiny_edge) {
+  Repair(PieceMesh& mesh, FaceGrid& grid, double tiny_edge)
+      : m_(mesh), grid_(grid), tiny_(tiny_edge), tiny2_(tiny_edge * tiny_edge) {
     for (std::size_t t = 0; t < m_.tris.size(); ++t) {
       // Where two exact nodes rounded to one point (one node), the rounding collapsed the edge between them: the
       // pieces along that edge, now with a node twice, vanish as they do in a collapse.
@@ -297,29 +300,28 @@ class Repair {
   int run() {
     int collapses = merged_;
     std::vector<char> dirty;  // (|tris|) the pieces to check this round; empty: all
+    std::vector<int32_t> bad;
     for (int round = 0; round < 16; ++round) {
-      std::vector<int32_t> bad = detect(dirty);
+      bad = detect(dirty);
       if (bad.empty()) return collapses;
       moved_.assign(m_.tris.size(), 0);
       int made = 0;
       for (const int32_t t : bad) {
         if (m_.alive[static_cast<std::size_t>(t)] && is_bad(t) && mend(t)) ++made;
       }
-      if (made == 0) {
-        // Tiny edges that no collapse can take are left; a defect is not.
-        for (const int32_t t : bad) {
-          if (m_.alive[static_cast<std::size_t>(t)] && (degenerate(tri(t)) || intersects_any(tri(t), {t}))) {
-            throw CutFailure{"result piece " + std::to_string(t) +
-                             " is degenerate or intersects another after rounding, and no collapse mends it"};
-          }
-        }
-        return collapses;
-      }
+      if (made == 0) break;
       collapses += made;
       dirty = moved_;
       for (const int32_t t : bad) dirty[static_cast<std::size_t>(t)] = 1;
     }
-    throw CutFailure{"the rounding repair did not converge"};
+    // Tiny edges and narrow pieces that no collapse can take are left; a defect is not.
+    for (const int32_t t : bad) {
+      if (m_.alive[static_cast<std::size_t>(t)] && defect(t)) {
+        throw CutFailure{"result piece " + std::to_string(t) +
+                         " is degenerate or intersects another after rounding, and no collapse mends it"};
+      }
+    }
+    return collapses;
   }
 
  private:
@@ -363,27 +365,48 @@ class Repair {
     }
     return false;
   }
+  // A piece narrower than the tiny edge: its height over its longest edge (twice its area over that edge's length)
+  // is below it. Caps (a corner almost on the opposite edge) and needles both are.
+  bool narrow(const Tri& t) const {
+    if (tiny2_ == 0.0) return false;
+    const Vec3 &a = m_.point(t[0]), &b = m_.point(t[1]), &c = m_.point(t[2]);
+    const double longest2 = std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
+    const double area2 = (b - a).cross(c - a).squaredNorm();  // (twice the area)^2
+    return area2 < tiny2_ * longest2;
+  }
+  bool defect(int32_t t) const { return degenerate(tri(t)) || intersects_any(tri(t), {t}); }
   bool is_bad(int32_t t) const {
     const Tri& x = tri(t);
-    return degenerate(x) || tiny(x) || intersects_any(x, {t});
+    return tiny(x) || narrow(x) || defect(t);
   }
 
   std::vector<int32_t> detect(const std::vector<char>& dirty) const;
   std::vector<int32_t> neighbours(int32_t n) const;
-  bool collapse(int32_t u, int32_t w);
+  bool collapse(int32_t u, int32_t w, double max_move, bool check = true);
+  bool collapse_cluster(int32_t t);
+  bool cancel_twin(int32_t t);
+  bool flip_cap(int32_t t);
   bool mend(int32_t t);
+
+  // What a collapse overwrote, for collapse_cluster to roll back: pieces (id, nodes, alive) and node -> |around_|.
+  struct Journal {
+    std::vector<std::tuple<int32_t, Tri, char>> pieces;
+    std::vector<std::pair<int32_t, std::size_t>> around;
+  };
 
   PieceMesh& m_;
   FaceGrid& grid_;
+  double tiny_;   // m
   double tiny2_;  // m^2
   int merged_ = 0;  // pieces the rounding collapsed (a node twice)
   std::unordered_map<int32_t, std::vector<int32_t>> around_;  // node -> the pieces it was ever in
   std::vector<char> moved_;  // (|tris|) the pieces a collapse of this round rewrote
+  Journal* journal_ = nullptr;  // set while collapse_cluster tries its collapses
 };
 
-// The live pieces with a new node that are degenerate, have a tiny edge or intersect a piece or a face of S (boxes
-// first, then exact tests), ascending; only those flagged in `dirty` (and the pieces they intersect) unless it is
-// empty.
+// The live pieces with a new node that are degenerate, have a tiny edge, are narrow or intersect a piece or a face of S
+// (boxes first, then exact tests), and those of old vertices only that are narrow, ascending; only those flagged in
+// `dirty` (and the pieces they intersect) unless it is empty.
 std::vector<int32_t> Repair::detect(const std::vector<char>& dirty) const {
   using Box = CGAL::Box_intersection_d::Box_with_info_d<double, 3, int32_t>;
   std::vector<char> bad(m_.tris.size(), 0), suspect(m_.tris.size(), 0);
@@ -399,9 +422,14 @@ std::vector<int32_t> Repair::detect(const std::vector<char>& dirty) const {
     const Tri& x = m_.tris[t];
     // info: 2 t + 1 for a piece, 2 f for a face of S.
     all.push_back(make(x, static_cast<int32_t>(2 * t + 1)));
-    if (m_.whole[t] || std::none_of(x.begin(), x.end(), [&](int32_t n) { return is_new(n); })) continue;
+    if (m_.whole[t]) continue;
+    if (std::none_of(x.begin(), x.end(), [&](int32_t n) { return is_new(n); })) {
+      // A piece of old vertices only (a face of S split at its own vertices): a flip may mend it when it is narrow.
+      if ((dirty.empty() || dirty[t]) && narrow(x)) bad[t] = 1;
+      continue;
+    }
     if (!dirty.empty() && !dirty[t]) continue;
-    if (degenerate(x) || tiny(x)) bad[t] = 1;
+    if (degenerate(x) || tiny(x) || narrow(x)) bad[t] = 1;
     suspect[t] = 1;
     suspects.push_back(all.back());
     const auto b = box_of(x);
@@ -457,9 +485,10 @@ std::vector<int32_t> Repair::neighbours(int32_t n) const {
   return out;
 }
 
-// Collapses new node u onto node w (an edge of a live piece) when that keeps the pieces valid (see repair_rounding);
-// returns whether it did.
-bool Repair::collapse(int32_t u, int32_t w) {
+// Collapses new node u onto node w (an edge of a live piece) when that keeps the pieces valid (see repair_rounding)
+// and u's old position lies within `max_move` (m) of the plane of every piece that moves; returns whether it did.
+// Without `check`, the moved pieces are not tested for intersections (collapse_cluster tests them all at its end).
+bool Repair::collapse(int32_t u, int32_t w, double max_move, bool check) {
   std::vector<int32_t> ring, gone, opposite;  // u's live pieces; those with edge uw; their third nodes
   for (const int32_t t : around_[u]) {
     if (!m_.alive[static_cast<std::size_t>(t)]) continue;
@@ -495,28 +524,175 @@ bool Repair::collapse(int32_t u, int32_t w) {
     const Vec3 n1 = (m_.point(x[1]) - m_.point(x[0])).cross(m_.point(x[2]) - m_.point(x[0]));
     const double scale = std::max({(b0 - a0).squaredNorm(), (c0 - a0).squaredNorm(), (c0 - b0).squaredNorm()});
     if (n0.norm() > 1e-6 * scale && !(n0.dot(n1) > 0.0)) return false;
+    // How far the surface moves there: u's distance from the moved piece's plane.
+    if (std::isfinite(max_move) && !(std::abs(n1.dot(m_.point(u) - m_.point(w))) <= max_move * n1.norm())) return false;
     moved.push_back(x);
     moved_ids.push_back(t);
   }
   std::vector<int32_t> skip = ring;
-  for (std::size_t i = 0; i < moved.size(); ++i) {
+  for (std::size_t i = 0; check && i < moved.size(); ++i) {
     if (intersects_any(moved[i], skip)) return false;
     for (std::size_t j = 0; j < i; ++j) {
       if (ids_intersect([&](int32_t n) { return P(n); }, moved[i], moved[j])) return false;
     }
   }
+  if (journal_ != nullptr) {
+    for (const int32_t t : ring) journal_->pieces.emplace_back(t, tri(t), m_.alive[static_cast<std::size_t>(t)]);
+    journal_->around.emplace_back(w, around_[w].size());
+  }
   for (const int32_t t : gone) m_.alive[static_cast<std::size_t>(t)] = 0;
   for (std::size_t i = 0; i < moved.size(); ++i) {
     m_.tris[static_cast<std::size_t>(moved_ids[i])] = moved[i];
+    m_.whole[static_cast<std::size_t>(moved_ids[i])] = 0;
     moved_[static_cast<std::size_t>(moved_ids[i])] = 1;
     around_[w].push_back(moved_ids[i]);
   }
   return true;
 }
 
-// Tries the collapses along the edges of bad piece t that move a new node, shortest edge first.
+// Collapses the cluster of defective piece t at once: its nodes and those joined to them by tiny edges (a few exact
+// points that rounded to distinct doubles ulps apart), onto the cluster's vertex of S if it has one, else its first
+// node. Single collapses can fail there where each leaves the cluster's other nodes folded over the moved pieces;
+// the pieces are tested for degeneracy and intersections once all have moved, and the collapses are rolled back when
+// that fails. Returns whether it collapsed the cluster.
+bool Repair::collapse_cluster(int32_t t) {
+  std::vector<int32_t> cluster(tri(t).begin(), tri(t).end());
+  for (std::size_t i = 0; i < cluster.size(); ++i) {
+    for (const int32_t n : neighbours(cluster[i])) {
+      if ((m_.point(n) - m_.point(cluster[i])).squaredNorm() < tiny2_ &&
+          std::find(cluster.begin(), cluster.end(), n) == cluster.end()) {
+        cluster.push_back(n);
+      }
+    }
+  }
+  // Only t's nodes that are joined by tiny edges: drop the others (t's own long edges joined them).
+  std::vector<int32_t> close;
+  for (const int32_t n : cluster) {
+    if (std::any_of(cluster.begin(), cluster.end(),
+                    [&](int32_t m) { return m != n && (m_.point(n) - m_.point(m)).squaredNorm() < tiny2_; })) {
+      close.push_back(n);
+    }
+  }
+  const auto old_nodes = std::count_if(close.begin(), close.end(), [&](int32_t n) { return !is_new(n); });
+  if (close.size() < 3 || old_nodes > 1) return false;
+  const int32_t w = old_nodes == 1 ? *std::find_if(close.begin(), close.end(), [&](int32_t n) { return !is_new(n); })
+                                   : *std::min_element(close.begin(), close.end());
+  Journal journal;
+  journal_ = &journal;
+  std::vector<int32_t> left;
+  for (const int32_t n : close) {
+    if (n != w) left.push_back(n);
+  }
+  for (bool progress = true; progress && !left.empty();) {
+    progress = false;
+    for (auto it = left.begin(); it != left.end();) {
+      if (collapse(*it, w, std::numeric_limits<double>::infinity(), false)) {
+        it = left.erase(it);
+        progress = true;
+      } else {
+        ++it;
+      }
+    }
+  }
+  journal_ = nullptr;
+  bool ok = left.empty();
+  for (std::size_t i = 0; ok && i < journal.pieces.size(); ++i) {
+    const int32_t p = std::get<0>(journal.pieces[i]);
+    if (m_.alive[static_cast<std::size_t>(p)]) ok = !defect(p);
+  }
+  if (ok) return true;
+  for (auto it = journal.pieces.rbegin(); it != journal.pieces.rend(); ++it) {
+    m_.tris[static_cast<std::size_t>(std::get<0>(*it))] = std::get<1>(*it);
+    m_.alive[static_cast<std::size_t>(std::get<0>(*it))] = std::get<2>(*it);
+  }
+  for (auto it = journal.around.rbegin(); it != journal.around.rend(); ++it) around_[it->first].resize(it->second);
+  return false;
+}
+
+// Removes defective piece t together with a live piece on the same three nodes turned the other way, when there is
+// one: the two enclose no volume, and every edge of theirs loses one use in each direction, so the pieces around
+// stay paired. (A sliver bubble whose exact nodes rounded to three points leaves such a pair.)
+bool Repair::cancel_twin(int32_t t) {
+  const Tri& x = tri(t);
+  for (const int32_t u : around_[x[0]]) {
+    if (u == t || !m_.alive[static_cast<std::size_t>(u)]) continue;
+    const Tri& y = tri(u);
+    for (int r = 0; r < 3; ++r) {
+      if (y[0] == x[r] && y[1] == x[(r + 2) % 3] && y[2] == x[(r + 1) % 3]) {
+        m_.alive[static_cast<std::size_t>(t)] = 0;
+        m_.alive[static_cast<std::size_t>(u)] = 0;
+        return true;
+      }
+    }
+  }
+  return false;
+}
+
+// The smallest interior angle of triangle (a, b, c), rad.
+double smallest_angle(const Vec3& a, const Vec3& b, const Vec3& c) {
+  const auto at = [](const Vec3& p, const Vec3& q, const Vec3& r) {
+    const Vec3 u = q - p, v = r - p;
+    return std::atan2(u.cross(v).norm(), u.dot(v));
+  };
+  return std::min({at(a, b, c), at(b, c, a), at(c, a, b)});
+}
+
+// Flips the longest edge (a, b) of narrow piece t = (a, b, v) with the piece (b, a, w) across it into (a, w, v) and
+// (w, b, v), when that raises the smallest angle of the two, edge vw is not there yet, neither new piece turns against
+// (b, a, w) and neither intersects anything. It moves no node: where v lies on ab within the tiny edge (a vertex of S
+// that an earlier rounding left a hair off a new edge), the surface moves by less than v's height over ab.
+bool Repair::flip_cap(int32_t t) {
+  Tri x = tri(t);
+  int k = 0;  // x[k] -> x[k + 1] is the longest edge
+  double longest = -1.0;
+  for (int i = 0; i < 3; ++i) {
+    const double l2 = (m_.point(x[i]) - m_.point(x[(i + 1) % 3])).squaredNorm();
+    if (l2 > longest) longest = l2, k = i;
+  }
+  const int32_t a = x[k], b = x[(k + 1) % 3], v = x[(k + 2) % 3];
+  int32_t across = -1, w = -1;
+  for (const int32_t u : around_[a]) {
+    if (u == t || !m_.alive[static_cast<std::size_t>(u)]) continue;
+    const Tri& y = tri(u);
+    for (int r = 0; r < 3; ++r) {
+      if (y[r] == b && y[(r + 1) % 3] == a) {
+        if (across != -1 && across != u) return false;  // not manifold here: leave it
+        across = u, w = y[(r + 2) % 3];
+      }
+    }
+  }
+  if (across == -1 || w == v) return false;
+  const std::vector<int32_t> nv = neighbours(v);
+  if (std::binary_search(nv.begin(), nv.end(), w)) return false;
+  const Tri t1{a, w, v}, t2{w, b, v};
+  if (degenerate(t1) || degenerate(t2)) return false;
+  const Vec3 &pa = m_.point(a), &pb = m_.point(b), &pv = m_.point(v), &pw = m_.point(w);
+  const Vec3 n = (pa - pb).cross(pw - pb);  // (b, a, w)'s normal
+  if (!((pw - pa).cross(pv - pa).dot(n) > 0.0) || !((pb - pw).cross(pv - pw).dot(n) > 0.0)) return false;
+  if (!(std::min(smallest_angle(pa, pw, pv), smallest_angle(pw, pb, pv)) >
+        std::min(smallest_angle(pa, pb, pv), smallest_angle(pb, pa, pw)))) {
+    return false;
+  }
+  const std::vector<int32_t> skip{t, across};
+  if (intersects_any(t1, skip) || intersects_any(t2, skip)) return false;
+  if (ids_intersect([&](int32_t node) { return P(node); }, t1, t2)) return false;
+  m_.tris[static_cast<std::size_t>(t)] = t1;
+  m_.tris[static_cast<std::size_t>(across)] = t2;
+  for (const int32_t id : skip) {
+    m_.whole[static_cast<std::size_t>(id)] = 0;
+    moved_[static_cast<std::size_t>(id)] = 1;
+  }
+  around_[w].push_back(t);
+  around_[v].push_back(across);
+  return true;
+}
+
+// Tries the collapses along the edges of bad piece t that move a new node, shortest edge first, then (for a defect)
+// the removal of a twin turned the other way and the collapse of its cluster. A piece that is only tiny or narrow (no defect) takes only collapses that move the
+// surface by less than the tiny edge.
 bool Repair::mend(int32_t t) {
   const Tri x = tri(t);
+  const double max_move = defect(t) ? std::numeric_limits<double>::infinity() : tiny_;
   std::vector<std::pair<double, std::array<int32_t, 2>>> tries;  // (squared length, (u, w))
   for (int k = 0; k < 3; ++k) {
     const int32_t a = x[k], b = x[(k + 1) % 3];
@@ -526,9 +702,10 @@ bool Repair::mend(int32_t t) {
   }
   std::sort(tries.begin(), tries.end());
   for (const auto& [l2, e] : tries) {
-    if (collapse(e[0], e[1])) return true;
+    if (collapse(e[0], e[1], max_move)) return true;
   }
-  return false;
+  if (std::isinf(max_move)) return cancel_twin(t) || collapse_cluster(t);
+  return narrow(x) && flip_cap(t);
 }
 
 }  // namespace

@@ -35,7 +35,7 @@ struct CutSummary {
   int fragments_removed = 0;       ///< loose pieces removed
   double fragment_volume_m3 = 0.0; ///< their material volume, m^3
   int snapped = 0;                 ///< rest-space blades snapped onto a recent cut's within cutting.min_feature
-  int collapses = 0;               ///< edge collapses of the rounding repair
+  int collapses = 0;               ///< edits of the rounding repair (edge collapses, cap flips, bubbles removed)
   int new_triangles = 0;           ///< triangles the surface boolean made
   double min_angle_deg = 0.0;      ///< smallest angle among them, degrees (reported null when there are none)
   double min_edge_m = 0.0;         ///< shortest edge among them, m (reported null when there are none)

@@ -198,6 +198,7 @@ struct PieceMesh {
   std::vector<Tri> tris;                  ///< the pieces (node ids); a collapse rewrites them
   std::vector<char> alive;                ///< (|tris|) 0 for a piece a collapse removed
   std::vector<char> whole;                ///< (|tris|) 1 for a face of S kept whole (never edited)
+  std::vector<char> blade;                ///< (|tris|) 1 for a piece of the blade, 0 for a piece of a face of S
   const std::vector<int32_t>* changing = nullptr;  ///< ChangingFaces::faces (ascending): faces of S the pieces replace
   const FanCounts* arcs = nullptr;                 ///< ChangingFaces::arcs: the vertices of S on their boundary
 
@@ -210,7 +211,8 @@ struct PieceMesh {
 /// is finer than `tiny_edge` (m). Pieces that the rounding made degenerate (three exactly collinear corners) or that
 /// intersect another piece or an unchanged neighbour of S (exact predicates on the rounded coordinates) are defects;
 /// pieces with an edge shorter than `tiny_edge` at a new node, and pieces narrower than it (height over the longest
-/// edge: caps and needles), are small. Each is mended by collapsing a new node along one of its edges onto its other
+/// edge: caps and needles), are small. First, a sliver pillow kept on both sides (pieces of S's faces and of the blade
+/// over the same polygon, turned the same way, within `tiny_edge` of each other) loses its side of S. Each is mended by collapsing a new node along one of its edges onto its other
 /// end, shortest edge first; for a small piece only where the surface moves by less than `tiny_edge` (the node's
 /// distance from every moved piece's plane). A collapse is made only when it keeps the pieces closed and manifold
 /// (the link condition, S's unchanged faces around the target included), makes no piece degenerate or turns none

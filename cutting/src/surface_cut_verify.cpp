@@ -292,6 +292,7 @@ class Repair {
       if (!m_.alive[t]) continue;
       for (const int32_t n : m_.tris[t]) around_[n].push_back(static_cast<int32_t>(t));
     }
+    if (tiny_edge > 0.0) drop_double_covers();
   }
 
   // Rounds of detection and collapses until nothing is found (the number of collapses), or a defect is left. The
@@ -382,6 +383,9 @@ class Repair {
 
   std::vector<int32_t> detect(const std::vector<char>& dirty) const;
   std::vector<int32_t> neighbours(int32_t n) const;
+  void drop_double_covers();
+  std::vector<int32_t> sheet(int32_t seed, const std::map<std::pair<int32_t, int32_t>, std::vector<int32_t>>& edges,
+                             std::vector<std::pair<int32_t, int32_t>>& rim) const;
   bool collapse(int32_t u, int32_t w, double max_move, bool check = true);
   bool collapse_cluster(int32_t t);
   bool cancel_twin(int32_t t);
@@ -548,6 +552,80 @@ bool Repair::collapse(int32_t u, int32_t w, double max_move, bool check) {
     around_[w].push_back(moved_ids[i]);
   }
   return true;
+}
+
+// The pieces of one kind (of S's faces, or of the blade) that piece `seed` reaches across edges used once in each
+// direction, each time by a piece of that kind, and into `rim` the directed edges where it stops because the edge is
+// used twice in this direction; empty when it reaches a piece of the other kind or an edge without a partner (a
+// boundary edge of the patch). `edges` maps each directed edge to the live pieces that use it.
+std::vector<int32_t> Repair::sheet(int32_t seed,
+                                   const std::map<std::pair<int32_t, int32_t>, std::vector<int32_t>>& edges,
+                                   std::vector<std::pair<int32_t, int32_t>>& rim) const {
+  const char kind = m_.blade[static_cast<std::size_t>(seed)];
+  std::vector<int32_t> out{seed};
+  rim.clear();
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    const Tri& x = tri(out[i]);
+    for (int r = 0; r < 3; ++r) {
+      const std::pair<int32_t, int32_t> e{x[r], x[(r + 1) % 3]};
+      if (edges.at(e).size() > 1) {
+        rim.push_back(e);
+        continue;
+      }
+      const auto back = edges.find({e.second, e.first});
+      if (back == edges.end() || back->second.size() != 1) return {};
+      const int32_t u = back->second[0];
+      if (m_.blade[static_cast<std::size_t>(u)] != kind) return {};
+      if (std::find(out.begin(), out.end(), u) == out.end()) out.push_back(u);
+      if (out.size() > 64) return {};
+    }
+  }
+  return out;
+}
+
+// A sliver pillow that the classification kept on both sides: a few pieces of S's faces (a fan around a vertex of S
+// that an earlier rounding left a hair off the blade's plane) and a few of the blade's cover the same polygon, turned
+// the same way, so that every edge of its rim is used twice in one direction. Both sheets bound the same surface to
+// within the collapse length; the pieces of S's faces go (the blade's stay), which leaves every rim edge used once each
+// way. Only where the two sheets have the same rim and every corner of S's sheet lies within the collapse length of
+// the blade sheet's planes.
+void Repair::drop_double_covers() {
+  std::map<std::pair<int32_t, int32_t>, std::vector<int32_t>> edges;  // directed edge -> live pieces
+  for (std::size_t t = 0; t < m_.tris.size(); ++t) {
+    if (!m_.alive[t]) continue;
+    const Tri& x = m_.tris[t];
+    for (int r = 0; r < 3; ++r) edges[{x[r], x[(r + 1) % 3]}].push_back(static_cast<int32_t>(t));
+  }
+  for (const auto& [e, users] : edges) {
+    if (users.size() != 2 || m_.blade[static_cast<std::size_t>(users[0])] == m_.blade[static_cast<std::size_t>(users[1])]) {
+      continue;
+    }
+    const int32_t s_seed = m_.blade[static_cast<std::size_t>(users[0])] ? users[1] : users[0];
+    const int32_t b_seed = s_seed == users[0] ? users[1] : users[0];
+    if (!m_.alive[static_cast<std::size_t>(s_seed)] || !m_.alive[static_cast<std::size_t>(b_seed)]) continue;
+    std::vector<std::pair<int32_t, int32_t>> s_rim, b_rim;
+    const std::vector<int32_t> s_sheet = sheet(s_seed, edges, s_rim), b_sheet = sheet(b_seed, edges, b_rim);
+    if (s_sheet.empty() || b_sheet.empty()) continue;
+    std::sort(s_rim.begin(), s_rim.end());
+    std::sort(b_rim.begin(), b_rim.end());
+    if (s_rim != b_rim) continue;
+    const auto near_blade = [&](int32_t n) {
+      const Vec3& p = m_.point(n);
+      for (const int32_t b : b_sheet) {
+        const Tri& y = tri(b);
+        const Vec3 normal = (m_.point(y[1]) - m_.point(y[0])).cross(m_.point(y[2]) - m_.point(y[0]));
+        if (!(std::abs(normal.dot(p - m_.point(y[0]))) <= tiny_ * normal.norm())) return false;
+      }
+      return true;
+    };
+    bool thin = true;
+    for (const int32_t t : s_sheet) {
+      for (const int32_t n : tri(t)) thin = thin && near_blade(n);
+    }
+    if (!thin) continue;
+    for (const int32_t t : s_sheet) m_.alive[static_cast<std::size_t>(t)] = 0;
+    merged_ += static_cast<int>(s_sheet.size());
+  }
 }
 
 // Collapses the cluster of defective piece t at once: its nodes and those joined to them by tiny edges (a few exact

@@ -122,12 +122,14 @@ int repair_pieces(const sim::TriMesh& surface, FaceGrid& grid, const ChangingFac
       }
       mesh.tris.push_back(t);
       mesh.whole.push_back(same ? 1 : 0);
+      mesh.blade.push_back(0);
       owner.push_back(static_cast<int>(i));
     }
   }
   for (const Tri& t : pieces.b) {
     mesh.tris.push_back(t);
     mesh.whole.push_back(0);
+    mesh.blade.push_back(1);
     owner.push_back(-1);
   }
   mesh.alive.assign(mesh.tris.size(), 1);

@@ -7,7 +7,8 @@
 //  - P and the blade are cut into regions along the constrained edges. A P region is removed when a point inside it
 //    is inside the blade (Side_of_triangle_mesh), taking the face centroid farthest from the blade; when every
 //    centroid lies within 1e-9 x the blade's size of the blade (coplanar up to the rounding of constructed points),
-//    it is removed when the normals of the input faces agree and kept when they are opposite. A blade region is kept
+//    it is removed when the normals of the input faces agree and kept when they are opposite (of the region's faces,
+//    the one most nearly parallel to its closest blade face decides). A blade region is kept
 //    (reversed) when, at a constrained edge where exactly one P face is kept, its halfedge runs in the same direction
 //    as that P face's, and discarded when the opposite halfedge does; conflicting votes fail the cut. A region without
 //    votes is discarded when it lies on P (coplanar), and otherwise kept when an exact ray-parity test (axis rays,
@@ -319,8 +320,18 @@ std::vector<char> classify_patch_regions(const Meshes& m, const sim::TriMesh& su
     if (d2 > eps2) {
       keep = inside_blade(q) == CGAL::ON_BOUNDED_SIDE ? 0 : 1;
     } else {
-      const FI g = b_tree.closest_point_and_primitive(q).second;
-      keep = input_normal(surface, m.p_origin[at]).dot(input_normal(blade, m.b_origin[g])) > 0.0 ? 0 : 1;
+      // On the blade: the region goes when it faces the way the blade face it lies on does. The face pair that
+      // decides is the region's face most nearly parallel to its closest blade face: a sliver of the region along a
+      // crease of the blade (a floor face whose centroid lies on the blade's wall) is perpendicular to its closest
+      // blade face, and the sign of that product would be rounding noise.
+      double best = -1.0, product = 0.0;
+      for (const FI f : faces) {
+        const FI g = b_tree.closest_point_and_primitive(centroid(face_points(m.p, f))).second;
+        const Vec3 a = input_normal(surface, m.p_origin[f]), b = input_normal(blade, m.b_origin[g]);
+        const double cosine = std::abs(a.dot(b)) / (a.norm() * b.norm());
+        if (cosine > best) best = cosine, product = a.dot(b);
+      }
+      keep = product > 0.0 ? 0 : 1;
     }
     if (!keep && options.removable && !options.removable(to_vec(q))) keep = 1;
   }

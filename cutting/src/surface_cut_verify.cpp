@@ -293,6 +293,7 @@ class Repair {
       for (const int32_t n : m_.tris[t]) around_[n].push_back(static_cast<int32_t>(t));
     }
     if (tiny_edge > 0.0) drop_double_covers();
+    build_piece_grid();
   }
 
   // Rounds of detection and collapses until nothing is found (the number of collapses), or a defect is left. The
@@ -355,9 +356,20 @@ class Repair {
   bool intersects_any(const Tri& t, const std::vector<int32_t>& skip) const {
     const auto box = box_of(t);
     const auto pos = [&](int32_t n) { return P(n); };
-    for (std::size_t u = 0; u < m_.tris.size(); ++u) {
-      if (!m_.alive[u] || std::find(skip.begin(), skip.end(), static_cast<int32_t>(u)) != skip.end()) continue;
-      if (overlap(box, box_of(m_.tris[u])) && ids_intersect(pos, t, m_.tris[u])) return true;
+    ++stamp_;
+    const std::array<int, 6> r = cell_range(box);
+    for (int i = r[0]; i <= r[3]; ++i) {
+      for (int j = r[1]; j <= r[4]; ++j) {
+        for (int k = r[2]; k <= r[5]; ++k) {
+          for (const int32_t u : cells_[static_cast<std::size_t>((i * cells_n_[1] + j) * cells_n_[2] + k)]) {
+            if (seen_[static_cast<std::size_t>(u)] == stamp_) continue;
+            seen_[static_cast<std::size_t>(u)] = stamp_;
+            if (!m_.alive[static_cast<std::size_t>(u)] || std::find(skip.begin(), skip.end(), u) != skip.end()) continue;
+            const Tri& x = tri(u);
+            if (overlap(box, box_of(x)) && ids_intersect(pos, t, x)) return true;
+          }
+        }
+      }
     }
     for (const int32_t f : grid_.query(*m_.surface, box[0], box[1])) {
       if (changing(f)) continue;
@@ -384,6 +396,11 @@ class Repair {
   std::vector<int32_t> detect(const std::vector<char>& dirty) const;
   std::vector<int32_t> neighbours(int32_t n) const;
   void drop_double_covers();
+  // A uniform grid of cells over the pieces for intersects_any: a piece is listed in every cell its box meets, and
+  // again after each edit that moves it (entries left from before are skipped by the box test).
+  void build_piece_grid();
+  void grid_insert(int32_t t);
+  std::array<int, 6> cell_range(const std::array<Vec3, 2>& box) const;
   std::vector<int32_t> sheet(int32_t seed, const std::map<std::pair<int32_t, int32_t>, std::vector<int32_t>>& edges,
                              std::vector<std::pair<int32_t, int32_t>>& rim) const;
   bool collapse(int32_t u, int32_t w, double max_move, bool check = true);
@@ -406,6 +423,12 @@ class Repair {
   std::unordered_map<int32_t, std::vector<int32_t>> around_;  // node -> the pieces it was ever in
   std::vector<char> moved_;  // (|tris|) the pieces a collapse of this round rewrote
   Journal* journal_ = nullptr;  // set while collapse_cluster tries its collapses
+  Vec3 cells_lo_ = Vec3::Zero();     // m, the grid's corner
+  double cell_ = 1.0;                // m, its cells' edge
+  std::array<int, 3> cells_n_{1, 1, 1};
+  std::vector<std::vector<int32_t>> cells_;  // (nx * ny * nz) pieces per cell
+  mutable std::vector<uint32_t> seen_;       // (|tris|) the query that last met each piece
+  mutable uint32_t stamp_ = 0;
 };
 
 // The live pieces with a new node that are degenerate, have a tiny edge, are narrow or intersect a piece or a face of S
@@ -550,8 +573,53 @@ bool Repair::collapse(int32_t u, int32_t w, double max_move, bool check) {
     m_.whole[static_cast<std::size_t>(moved_ids[i])] = 0;
     moved_[static_cast<std::size_t>(moved_ids[i])] = 1;
     around_[w].push_back(moved_ids[i]);
+    grid_insert(moved_ids[i]);
   }
   return true;
+}
+
+void Repair::build_piece_grid() {
+  Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (const Tri& t : m_.tris) {
+    for (const int32_t n : t) {
+      lo = lo.cwiseMin(m_.point(n));
+      hi = hi.cwiseMax(m_.point(n));
+    }
+  }
+  seen_.assign(m_.tris.size(), 0);
+  if (m_.tris.empty()) return;
+  // About one cell per piece, at most 32 along the longest side.
+  const double extent = (hi - lo).maxCoeff();
+  const int along = std::clamp(static_cast<int>(std::cbrt(static_cast<double>(m_.tris.size()))), 1, 32);
+  cell_ = extent > 0.0 ? extent / along : 1.0;
+  cells_lo_ = lo;
+  for (int a = 0; a < 3; ++a) cells_n_[a] = std::clamp(static_cast<int>((hi[a] - lo[a]) / cell_) + 1, 1, along + 1);
+  cells_.assign(static_cast<std::size_t>(cells_n_[0] * cells_n_[1] * cells_n_[2]), {});
+  for (std::size_t t = 0; t < m_.tris.size(); ++t) {
+    if (m_.alive[t]) grid_insert(static_cast<int32_t>(t));
+  }
+}
+
+std::array<int, 6> Repair::cell_range(const std::array<Vec3, 2>& box) const {
+  std::array<int, 6> r{};
+  for (int a = 0; a < 3; ++a) {
+    const auto at = [&](double x) {
+      const double c = std::floor((x - cells_lo_[a]) / cell_);
+      return static_cast<int>(std::clamp(c, 0.0, static_cast<double>(cells_n_[a] - 1)));
+    };
+    r[a] = at(box[0][a]);
+    r[a + 3] = at(box[1][a]);
+  }
+  return r;
+}
+
+void Repair::grid_insert(int32_t t) {
+  const std::array<int, 6> r = cell_range(box_of(tri(t)));
+  for (int i = r[0]; i <= r[3]; ++i) {
+    for (int j = r[1]; j <= r[4]; ++j) {
+      for (int k = r[2]; k <= r[5]; ++k) cells_[static_cast<std::size_t>((i * cells_n_[1] + j) * cells_n_[2] + k)].push_back(t);
+    }
+  }
 }
 
 // The pieces of one kind (of S's faces, or of the blade) that piece `seed` reaches across edges used once in each
@@ -762,6 +830,8 @@ bool Repair::flip_cap(int32_t t) {
   }
   around_[w].push_back(t);
   around_[v].push_back(across);
+  grid_insert(t);
+  grid_insert(across);
   return true;
 }
 

@@ -643,7 +643,8 @@ std::vector<int32_t> Repair::sheet(int32_t seed,
       const auto back = edges.find({e.second, e.first});
       if (back == edges.end() || back->second.size() != 1) return {};
       const int32_t u = back->second[0];
-      if (m_.blade[static_cast<std::size_t>(u)] != kind) return {};
+      // A piece of another kind, or one that an earlier pillow took (`edges` is from before): not this case.
+      if (m_.blade[static_cast<std::size_t>(u)] != kind || !m_.alive[static_cast<std::size_t>(u)]) return {};
       if (std::find(out.begin(), out.end(), u) == out.end()) out.push_back(u);
       if (out.size() > 64) return {};
     }
@@ -658,41 +659,47 @@ std::vector<int32_t> Repair::sheet(int32_t seed,
 // way. Only where the two sheets have the same rim and every corner of S's sheet lies within the collapse length of
 // the blade sheet's planes.
 void Repair::drop_double_covers() {
-  std::map<std::pair<int32_t, int32_t>, std::vector<int32_t>> edges;  // directed edge -> live pieces
-  for (std::size_t t = 0; t < m_.tris.size(); ++t) {
-    if (!m_.alive[t]) continue;
-    const Tri& x = m_.tris[t];
-    for (int r = 0; r < 3; ++r) edges[{x[r], x[(r + 1) % 3]}].push_back(static_cast<int32_t>(t));
-  }
-  for (const auto& [e, users] : edges) {
-    if (users.size() != 2 || m_.blade[static_cast<std::size_t>(users[0])] == m_.blade[static_cast<std::size_t>(users[1])]) {
-      continue;
+  // One pillow per pass, the edge map rebuilt after each (a pillow's pieces may border another's).
+  for (int pass = 0; pass < 64; ++pass) {
+    std::map<std::pair<int32_t, int32_t>, std::vector<int32_t>> edges;  // directed edge -> live pieces
+    for (std::size_t t = 0; t < m_.tris.size(); ++t) {
+      if (!m_.alive[t]) continue;
+      const Tri& x = m_.tris[t];
+      for (int r = 0; r < 3; ++r) edges[{x[r], x[(r + 1) % 3]}].push_back(static_cast<int32_t>(t));
     }
-    const int32_t s_seed = m_.blade[static_cast<std::size_t>(users[0])] ? users[1] : users[0];
-    const int32_t b_seed = s_seed == users[0] ? users[1] : users[0];
-    if (!m_.alive[static_cast<std::size_t>(s_seed)] || !m_.alive[static_cast<std::size_t>(b_seed)]) continue;
-    std::vector<std::pair<int32_t, int32_t>> s_rim, b_rim;
-    const std::vector<int32_t> s_sheet = sheet(s_seed, edges, s_rim), b_sheet = sheet(b_seed, edges, b_rim);
-    if (s_sheet.empty() || b_sheet.empty()) continue;
-    std::sort(s_rim.begin(), s_rim.end());
-    std::sort(b_rim.begin(), b_rim.end());
-    if (s_rim != b_rim) continue;
-    const auto near_blade = [&](int32_t n) {
-      const Vec3& p = m_.point(n);
-      for (const int32_t b : b_sheet) {
-        const Tri& y = tri(b);
-        const Vec3 normal = (m_.point(y[1]) - m_.point(y[0])).cross(m_.point(y[2]) - m_.point(y[0]));
-        if (!(std::abs(normal.dot(p - m_.point(y[0]))) <= tiny_ * normal.norm())) return false;
+    bool dropped = false;
+    for (const auto& [e, users] : edges) {
+      if (users.size() != 2 || m_.blade[static_cast<std::size_t>(users[0])] == m_.blade[static_cast<std::size_t>(users[1])]) {
+        continue;
       }
-      return true;
-    };
-    bool thin = true;
-    for (const int32_t t : s_sheet) {
-      for (const int32_t n : tri(t)) thin = thin && near_blade(n);
+      const int32_t s_seed = m_.blade[static_cast<std::size_t>(users[0])] ? users[1] : users[0];
+      const int32_t b_seed = s_seed == users[0] ? users[1] : users[0];
+      std::vector<std::pair<int32_t, int32_t>> s_rim, b_rim;
+      const std::vector<int32_t> s_sheet = sheet(s_seed, edges, s_rim), b_sheet = sheet(b_seed, edges, b_rim);
+      if (s_sheet.empty() || b_sheet.empty()) continue;
+      std::sort(s_rim.begin(), s_rim.end());
+      std::sort(b_rim.begin(), b_rim.end());
+      if (s_rim != b_rim) continue;
+      const auto near_blade = [&](int32_t n) {
+        const Vec3& p = m_.point(n);
+        for (const int32_t b : b_sheet) {
+          const Tri& y = tri(b);
+          const Vec3 normal = (m_.point(y[1]) - m_.point(y[0])).cross(m_.point(y[2]) - m_.point(y[0]));
+          if (!(std::abs(normal.dot(p - m_.point(y[0]))) <= tiny_ * normal.norm())) return false;
+        }
+        return true;
+      };
+      bool thin = true;
+      for (const int32_t t : s_sheet) {
+        for (const int32_t n : tri(t)) thin = thin && near_blade(n);
+      }
+      if (!thin) continue;
+      for (const int32_t t : s_sheet) m_.alive[static_cast<std::size_t>(t)] = 0;
+      merged_ += static_cast<int>(s_sheet.size());
+      dropped = true;
+      break;
     }
-    if (!thin) continue;
-    for (const int32_t t : s_sheet) m_.alive[static_cast<std::size_t>(t)] = 0;
-    merged_ += static_cast<int>(s_sheet.size());
+    if (!dropped) return;
   }
 }
 

@@ -517,7 +517,11 @@ std::vector<int32_t> Repair::neighbours(int32_t n) const {
 // Without `check`, the moved pieces are not tested for intersections (collapse_cluster tests them all at its end).
 bool Repair::collapse(int32_t u, int32_t w, double max_move, bool check) {
   std::vector<int32_t> ring, gone, opposite;  // u's live pieces; those with edge uw; their third nodes
-  for (const int32_t t : around_[u]) {
+  // A piece can be listed twice: a flip can give a piece back a node it had lost.
+  std::vector<int32_t> listed = around_[u];
+  std::sort(listed.begin(), listed.end());
+  listed.erase(std::unique(listed.begin(), listed.end()), listed.end());
+  for (const int32_t t : listed) {
     if (!m_.alive[static_cast<std::size_t>(t)]) continue;
     const Tri& x = tri(t);
     if (x[0] != u && x[1] != u && x[2] != u) continue;

@@ -262,6 +262,23 @@ TEST_F(WorldTest, ARegionOnTheBladeIsDecidedByItsFaceParallelToTheBlade) {
   EXPECT_NEAR(removed, prism, 1e-3 * prism);
 }
 
+// The cell E = 1e6 Pa, nu = 0.499, dt = 1 ms: at its second real bite an edge of 1 nm (a new node beside a vertex of
+// S) was left uncollapsed, and a 1.2e-4 degree piece with it: a flip had listed a piece twice among a node's, so that
+// the collapse saw three pieces along the edge where there were two. Every real bite's new triangles now keep their
+// edges at the collapse length (0.01 min_feature, 3 um) or longer and their angles above 0.01 degrees.
+TEST_F(WorldTest, ABiteKeepsNoEdgeUnderTheCollapseLength) {
+  const Report r = punch_cell([&](const std::string& t) { return scene(t); }, 1e6, 0.001, 0.499);
+  expect_every_bite_cuts_unmoved(r);
+  int cut = 0;
+  for (const CutSummary& c : r.cuts) {
+    if (c.status != "ok") continue;
+    ++cut;
+    EXPECT_GE(c.min_edge_m, 0.01 * 3e-4 * (1.0 - 1e-9)) << "cut at t = " << c.t;
+    EXPECT_GE(c.min_angle_deg, 0.01) << "cut at t = " << c.t;
+  }
+  EXPECT_GE(cut, 10);
+}
+
 TEST_F(WorldTest, AHeldToolLosesItsTimelineCutsAndStaysWhereItIs) {
   World world(scene(kCube), WorldOptions{.render = false});
   for (int i = 0; i < 2; ++i) world.step();

@@ -301,6 +301,7 @@ class Repair {
   // bad: two pieces neither of which changed since a round that found neither bad still do not intersect.
   int run() {
     int collapses = merged_;
+    collapses += merge_ulp_pairs();
     std::vector<char> dirty;  // (|tris|) the pieces to check this round; empty: all
     std::vector<int32_t> bad;
     for (int round = 0; round < 16; ++round) {
@@ -396,6 +397,7 @@ class Repair {
   std::vector<int32_t> detect(const std::vector<char>& dirty) const;
   std::vector<int32_t> neighbours(int32_t n) const;
   void drop_double_covers();
+  int merge_ulp_pairs();
   // A uniform grid of cells over the pieces for intersects_any: a piece is listed in every cell its box meets, and
   // again after each edit that moves it (entries left from before are skipped by the box test).
   void build_piece_grid();
@@ -624,6 +626,30 @@ void Repair::grid_insert(int32_t t) {
       for (int k = r[2]; k <= r[5]; ++k) cells_[static_cast<std::size_t>((i * cells_n_[1] + j) * cells_n_[2] + k)].push_back(t);
     }
   }
+}
+
+// New nodes within a few units in the last place of a node they share an edge with are that node: each collapses onto
+// it where the link condition holds and nothing turns over (the rounds then test what moved). Returns the collapses.
+int Repair::merge_ulp_pairs() {
+  if (tiny2_ == 0.0) return 0;
+  int made = 0;
+  moved_.assign(m_.tris.size(), 0);
+  for (std::size_t t = 0; t < m_.tris.size(); ++t) {
+    if (!m_.alive[t]) continue;
+    const Tri x = m_.tris[t];
+    for (int k = 0; k < 3; ++k) {
+      const int32_t a = x[k], b = x[(k + 1) % 3];
+      const Vec3 d = m_.point(a) - m_.point(b);
+      const double ulp = 8.0 * std::numeric_limits<double>::epsilon() * m_.point(a).cwiseAbs().maxCoeff();
+      if (!(d.cwiseAbs().maxCoeff() <= ulp)) continue;
+      if ((is_new(a) && collapse(a, b, std::numeric_limits<double>::infinity(), false)) ||
+          (is_new(b) && collapse(b, a, std::numeric_limits<double>::infinity(), false))) {
+        ++made;
+        break;
+      }
+    }
+  }
+  return made;
 }
 
 // The pieces of one kind (of S's faces, or of the blade) that piece `seed` reaches across edges used once in each

@@ -211,7 +211,8 @@ struct PieceMesh {
 /// is finer than `tiny_edge` (m). Pieces that the rounding made degenerate (three exactly collinear corners) or that
 /// intersect another piece or an unchanged neighbour of S (exact predicates on the rounded coordinates) are defects;
 /// pieces with an edge shorter than `tiny_edge` at a new node, and pieces narrower than it (height over the longest
-/// edge: caps and needles), are small. First, a sliver pillow kept on both sides (pieces of S's faces and of the blade
+/// edge: caps and needles), are small. First, new nodes within a few units in the last place of a neighbour merge into
+/// it (collapses without the intersection test; the rounds test what moved), and a sliver pillow kept on both sides (pieces of S's faces and of the blade
 /// over the same polygon, turned the same way, within `tiny_edge` of each other) loses its side of S. Each is mended by collapsing a new node along one of its edges onto its other
 /// end, shortest edge first; for a small piece only where the surface moves by less than `tiny_edge` (the node's
 /// distance from every moved piece's plane). A collapse is made only when it keeps the pieces closed and manifold

@@ -66,8 +66,7 @@ ChangingFaces changing_faces(const sim::TriMesh& surface, Patch&& patch, std::ve
   return changing;
 }
 
-// The smallest angle and the shortest edge among the triangles the cut made (written.changed, not kept whole). Angles
-// by atan2(|u x v|, u . v), accurate for the tiniest angles of slivers.
+// The smallest angle and the shortest edge among the triangles the cut made (written.changed, not kept whole).
 void new_triangle_quality(const sim::TriMesh& out, const WrittenPatch& written, SurfaceEditResult& result) {
   double min_angle = std::numbers::pi;                        // rad
   double min_edge2 = std::numeric_limits<double>::infinity();  // m^2
@@ -75,13 +74,9 @@ void new_triangle_quality(const sim::TriMesh& out, const WrittenPatch& written, 
   for (std::size_t i = 0; i < written.changed.size(); ++i) {
     if (written.changed_whole[i]) continue;
     const Tri& t = out.triangles[static_cast<std::size_t>(written.changed[i])];
-    for (int k = 0; k < 3; ++k) {
-      const Vec3& a = out.vertices[static_cast<std::size_t>(t[k])];
-      const Vec3 u = out.vertices[static_cast<std::size_t>(t[(k + 1) % 3])] - a;
-      const Vec3 v = out.vertices[static_cast<std::size_t>(t[(k + 2) % 3])] - a;
-      min_edge2 = std::min(min_edge2, u.squaredNorm());
-      min_angle = std::min(min_angle, std::atan2(u.cross(v).norm(), u.dot(v)));
-    }
+    const auto corner = [&](int k) -> const Vec3& { return out.vertices[static_cast<std::size_t>(t[k])]; };
+    for (int k = 0; k < 3; ++k) min_edge2 = std::min(min_edge2, (corner((k + 1) % 3) - corner(k)).squaredNorm());
+    min_angle = std::min(min_angle, smallest_angle(corner(0), corner(1), corner(2)));
     ++n;
   }
   result.new_triangles = n;

@@ -306,14 +306,12 @@ std::vector<char> classify_patch_regions(const Meshes& m, const sim::TriMesh& su
     const auto& faces = p_faces[static_cast<std::size_t>(r)];
     Point q = centroid(face_points(m.p, rep[static_cast<std::size_t>(r)]));
     double d2 = b_tree.squared_distance(q);
-    FI at = rep[static_cast<std::size_t>(r)];
     for (std::size_t i = 0; d2 <= eps2 && i < faces.size(); ++i) {
       const Point c = centroid(face_points(m.p, faces[i]));
       const double e2 = b_tree.squared_distance(c);
       if (e2 > d2) {
         d2 = e2;
         q = c;
-        at = faces[i];
       }
     }
     char& keep = p_keep[static_cast<std::size_t>(r)];

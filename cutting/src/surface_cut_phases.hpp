@@ -7,6 +7,7 @@
 //  3. write_back (surface_cut_write_back.cpp, no CGAL): the kept pieces written into S through the SurfaceEditor;
 //  4. verify_result (surface_cut_verify.cpp, CGAL predicates only): the local checks of the result.
 // No CGAL type appears here: the exact blade is an opaque handle, and the phases pass plain arrays.
+#include <algorithm>
 #include <array>
 #include <bit>
 #include <cmath>
@@ -33,6 +34,16 @@ struct CutFailure {
 
 /// Whether every coordinate of p is finite.
 inline bool finite(const sim::Vec3& p) { return std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z()); }
+
+/// The smallest interior angle of triangle (a, b, c), rad: atan2(|u x v|, u . v) at each corner, accurate for the
+/// tiniest angles of slivers.
+inline double smallest_angle(const sim::Vec3& a, const sim::Vec3& b, const sim::Vec3& c) {
+  const auto at = [](const sim::Vec3& p, const sim::Vec3& q, const sim::Vec3& r) {
+    const sim::Vec3 u = q - p, v = r - p;
+    return std::atan2(u.cross(v).norm(), u.dot(v));
+  };
+  return std::min({at(a, b, c), at(b, c, a), at(c, a, b)});
+}
 
 /// The directed edge (a, b) as one sortable number.
 inline uint64_t directed_edge_key(int32_t a, int32_t b) {
@@ -212,9 +223,10 @@ struct PieceMesh {
 /// intersect another piece or an unchanged neighbour of S (exact predicates on the rounded coordinates) are defects;
 /// pieces with an edge shorter than `tiny_edge` at a new node, and pieces narrower than it (height over the longest
 /// edge: caps and needles), are small. First, new nodes within a few units in the last place of a neighbour merge into
-/// it (collapses without the intersection test; the rounds test what moved), and a sliver pillow kept on both sides (pieces of S's faces and of the blade
-/// over the same polygon, turned the same way, within `tiny_edge` of each other) loses its side of S. Each is mended by collapsing a new node along one of its edges onto its other
-/// end, shortest edge first; for a small piece only where the surface moves by less than `tiny_edge` (the node's
+/// it (collapses without the intersection test; the rounds test what moved), and a sliver pillow kept on both sides
+/// (pieces of S's faces and of the blade over the same polygon, turned the same way, within `tiny_edge` of each other)
+/// loses its side of S. Each bad piece is mended by collapsing a new node along one of its edges onto its other end,
+/// shortest edge first; for a small piece only where the surface moves by less than `tiny_edge` (the node's
 /// distance from every moved piece's plane). A collapse is made only when it keeps the pieces closed and manifold
 /// (the link condition, S's unchanged faces around the target included), makes no piece degenerate or turns none
 /// over, and makes no piece intersect any other or an unchanged neighbour (exact tests). A defect that no single

@@ -358,20 +358,17 @@ class Repair {
     const auto box = box_of(t);
     const auto pos = [&](int32_t n) { return P(n); };
     ++stamp_;
-    const std::array<int, 6> r = cell_range(box);
-    for (int i = r[0]; i <= r[3]; ++i) {
-      for (int j = r[1]; j <= r[4]; ++j) {
-        for (int k = r[2]; k <= r[5]; ++k) {
-          for (const int32_t u : cells_[static_cast<std::size_t>((i * cells_n_[1] + j) * cells_n_[2] + k)]) {
-            if (seen_[static_cast<std::size_t>(u)] == stamp_) continue;
-            seen_[static_cast<std::size_t>(u)] = stamp_;
-            if (!m_.alive[static_cast<std::size_t>(u)] || std::find(skip.begin(), skip.end(), u) != skip.end()) continue;
-            const Tri& x = tri(u);
-            if (overlap(box, box_of(x)) && ids_intersect(pos, t, x)) return true;
-          }
-        }
+    bool hit = false;
+    for_cells(box, [&](std::size_t cell) {
+      for (const int32_t u : cells_[cell]) {
+        if (hit || seen_[static_cast<std::size_t>(u)] == stamp_) continue;
+        seen_[static_cast<std::size_t>(u)] = stamp_;
+        if (!m_.alive[static_cast<std::size_t>(u)] || std::find(skip.begin(), skip.end(), u) != skip.end()) continue;
+        const Tri& x = tri(u);
+        hit = overlap(box, box_of(x)) && ids_intersect(pos, t, x);
       }
-    }
+    });
+    if (hit) return true;
     for (const int32_t f : grid_.query(*m_.surface, box[0], box[1])) {
       if (changing(f)) continue;
       const Tri& g = m_.surface->triangles[static_cast<std::size_t>(f)];
@@ -402,7 +399,9 @@ class Repair {
   // again after each edit that moves it (entries left from before are skipped by the box test).
   void build_piece_grid();
   void grid_insert(int32_t t);
-  std::array<int, 6> cell_range(const std::array<Vec3, 2>& box) const;
+  // Calls f(index into cells_) for each cell of the grid that `box` meets.
+  template <class F>
+  void for_cells(const std::array<Vec3, 2>& box, F&& f) const;
   std::vector<int32_t> sheet(int32_t seed, const std::map<std::pair<int32_t, int32_t>, std::vector<int32_t>>& edges,
                              std::vector<std::pair<int32_t, int32_t>>& rim) const;
   bool collapse(int32_t u, int32_t w, double max_move, bool check = true);
@@ -421,7 +420,7 @@ class Repair {
   FaceGrid& grid_;
   double tiny_;   // m
   double tiny2_;  // m^2
-  int merged_ = 0;  // pieces the rounding collapsed (a node twice)
+  int merged_ = 0;  // pieces gone before the rounds: with a node twice (rounding), or a pillow's side
   std::unordered_map<int32_t, std::vector<int32_t>> around_;  // node -> the pieces it was ever in
   std::vector<char> moved_;  // (|tris|) the pieces a collapse of this round rewrote
   Journal* journal_ = nullptr;  // set while collapse_cluster tries its collapses
@@ -606,8 +605,9 @@ void Repair::build_piece_grid() {
   }
 }
 
-std::array<int, 6> Repair::cell_range(const std::array<Vec3, 2>& box) const {
-  std::array<int, 6> r{};
+template <class F>
+void Repair::for_cells(const std::array<Vec3, 2>& box, F&& f) const {
+  std::array<int, 6> r{};  // lower, then upper cell index per axis
   for (int a = 0; a < 3; ++a) {
     const auto at = [&](double x) {
       const double c = std::floor((x - cells_lo_[a]) / cell_);
@@ -616,16 +616,15 @@ std::array<int, 6> Repair::cell_range(const std::array<Vec3, 2>& box) const {
     r[a] = at(box[0][a]);
     r[a + 3] = at(box[1][a]);
   }
-  return r;
+  for (int i = r[0]; i <= r[3]; ++i) {
+    for (int j = r[1]; j <= r[4]; ++j) {
+      for (int k = r[2]; k <= r[5]; ++k) f(static_cast<std::size_t>((i * cells_n_[1] + j) * cells_n_[2] + k));
+    }
+  }
 }
 
 void Repair::grid_insert(int32_t t) {
-  const std::array<int, 6> r = cell_range(box_of(tri(t)));
-  for (int i = r[0]; i <= r[3]; ++i) {
-    for (int j = r[1]; j <= r[4]; ++j) {
-      for (int k = r[2]; k <= r[5]; ++k) cells_[static_cast<std::size_t>((i * cells_n_[1] + j) * cells_n_[2] + k)].push_back(t);
-    }
-  }
+  for_cells(box_of(tri(t)), [&](std::size_t cell) { cells_[cell].push_back(t); });
 }
 
 // New nodes within a few units in the last place of a node they share an edge with are that node: each collapses onto
@@ -699,10 +698,10 @@ void Repair::drop_double_covers() {
     }
     bool dropped = false;
     for (const auto& [e, users] : edges) {
-      if (users.size() != 2 || m_.blade[static_cast<std::size_t>(users[0])] == m_.blade[static_cast<std::size_t>(users[1])]) {
-        continue;
-      }
-      const int32_t s_seed = m_.blade[static_cast<std::size_t>(users[0])] ? users[1] : users[0];
+      if (users.size() != 2) continue;
+      const auto from_blade = [&](int32_t t) { return m_.blade[static_cast<std::size_t>(t)] != 0; };
+      if (from_blade(users[0]) == from_blade(users[1])) continue;
+      const int32_t s_seed = from_blade(users[0]) ? users[1] : users[0];
       const int32_t b_seed = s_seed == users[0] ? users[1] : users[0];
       std::vector<std::pair<int32_t, int32_t>> s_rim, b_rim;
       const std::vector<int32_t> s_sheet = sheet(s_seed, edges, s_rim), b_sheet = sheet(b_seed, edges, b_rim);
@@ -811,15 +810,6 @@ bool Repair::cancel_twin(int32_t t) {
   return false;
 }
 
-// The smallest interior angle of triangle (a, b, c), rad.
-double smallest_angle(const Vec3& a, const Vec3& b, const Vec3& c) {
-  const auto at = [](const Vec3& p, const Vec3& q, const Vec3& r) {
-    const Vec3 u = q - p, v = r - p;
-    return std::atan2(u.cross(v).norm(), u.dot(v));
-  };
-  return std::min({at(a, b, c), at(b, c, a), at(c, a, b)});
-}
-
 // Flips the longest edge (a, b) of narrow piece t = (a, b, v) with the piece (b, a, w) across it into (a, w, v) and
 // (w, b, v), when that raises the smallest angle of the two, edge vw is not there yet, neither new piece turns against
 // (b, a, w) and neither intersects anything. It moves no node: where v lies on ab within the tiny edge (a vertex of S
@@ -873,8 +863,8 @@ bool Repair::flip_cap(int32_t t) {
 }
 
 // Tries the collapses along the edges of bad piece t that move a new node, shortest edge first, then (for a defect)
-// the removal of a twin turned the other way and the collapse of its cluster. A piece that is only tiny or narrow (no defect) takes only collapses that move the
-// surface by less than the tiny edge.
+// the removal of a twin turned the other way and the collapse of its cluster, or (for a narrow piece) a flip. A piece
+// that is only tiny or narrow (no defect) takes only collapses that move the surface by less than the tiny edge.
 bool Repair::mend(int32_t t) {
   const Tri x = tri(t);
   const double max_move = defect(t) ? std::numeric_limits<double>::infinity() : tiny_;

@@ -152,8 +152,7 @@ class CholmodFactor {
     cholmod_factorize(&a, m_L, &m_c);
     const bool ok = m_c.status >= CHOLMOD_OK && m_L->minor == m_L->n;
     if (ok && m_keep_single) {
-      const double* x = static_cast<const double*>(m_L->x);
-      m_single.assign(x, x + m_L->xsize);
+      m_plan.pack(structure(), static_cast<const double*>(m_L->x), m_single);
     }
     return ok;
   }
@@ -170,7 +169,7 @@ class CholmodFactor {
   /// the preconditioner of PCG, whose triangular solves are bound by the memory traffic of L. The solves run on two
   /// of the executor's threads (SupernodalSolvePlan; the same result with one). False without a copy.
   bool solve_single(const VecX& b, VecX& x, Executor* executor) {
-    if (m_L == nullptr || m_single.size() != m_L->xsize || b.size() != Eigen::Index(m_L->n)) return false;
+    if (m_L == nullptr || m_single.size() != m_plan.packed_size() || b.size() != Eigen::Index(m_L->n)) return false;
     const int n = int(m_L->n);
     const int* perm = static_cast<const int*>(m_L->Perm);
     m_perm.resize(std::size_t(n));
@@ -352,7 +351,7 @@ class CholmodFactor {
   std::size_t m_default_nrelax[3] = {4, 16, 48};
   cholmod_factor* m_L = nullptr;
   bool m_keep_single = false;
-  std::vector<float> m_single;  ///< L's values in single precision (L->xsize), when kept
+  std::vector<float> m_single;  ///< L's values in single precision, when kept (m_plan's packed layout)
   std::vector<float> m_perm;    ///< solve_single's permuted right-hand side (n)
   SupernodalSolvePlan m_plan;   ///< how solve_single splits its triangular solves between two threads
   cholmod_dense* m_x = nullptr;  ///< solve2 workspaces, kept

@@ -1,84 +1,14 @@
 #include "supernodal_solve.hpp"
 
-#include <Eigen/Core>
 #include <algorithm>
 #include <numeric>
 
 #include "octocut/sim/parallel.hpp"
-
-extern "C" {
-// Single-precision BLAS (the BLAS CHOLMOD links, OpenBLAS on Debian), for the largest supernodes.
-void strsv_(const char* uplo, const char* trans, const char* diag, const int* n, const float* a, const int* lda,
-            float* x, const int* incx);
-void sgemv_(const char* trans, const int* m, const int* n, const float* alpha, const float* a, const int* lda,
-            const float* x, const int* incx, const float* beta, float* y, const int* incy);
-}
+#include "supernode_kernels.hpp"
 
 namespace octocut::sim {
 
 namespace {
-
-// A supernode's block of L (column-major, leading dimension nsrow) and a piece of a vector. Supernodes with fewer
-// than kBlasEntries entries use Eigen's kernels (SSE2 at -O2, inlined), the others BLAS: most supernodes have 3-24
-// columns, and for those a call to OpenBLAS's strsv and sgemv costs more than its arithmetic (a work buffer taken
-// under a lock that the two threads share, column loops of calls); the large ones near the root gain from its
-// AVX-512 kernels. The factor of meniscus_punch (7,053 columns, 1.27 million entries, 499 supernodes) is applied
-// in 0.26-0.30 ms instead of 0.35-0.55 ms; that of meniscus_rest at level 6 (34,050 columns) as fast as with BLAS
-// alone, and 12 % faster than with Eigen alone (docs/RESULTS.md).
-constexpr long kBlasEntries = 8192;
-using FloatBlock = Eigen::Map<const Eigen::MatrixXf, 0, Eigen::OuterStride<>>;
-using FloatVector = Eigen::Map<Eigen::VectorXf>;
-
-// One supernode's block: its nscol x nscol lower-triangular diagonal block D and the nb = nsrow - nscol rows below
-// it, B, column-major with leading dimension nsrow.
-struct Block {
-  const float* values;
-  int nscol, nsrow;
-  [[nodiscard]] int below() const { return nsrow - nscol; }
-  [[nodiscard]] bool blas() const { return long(nscol) * nsrow >= kBlasEntries; }
-  [[nodiscard]] FloatBlock diagonal() const { return {values, nscol, nscol, Eigen::OuterStride<>(nsrow)}; }
-  [[nodiscard]] FloatBlock rows_below() const { return {values + nscol, below(), nscol, Eigen::OuterStride<>(nsrow)}; }
-  // y = D^-1 y (nscol).
-  void solve(float* y) const {
-    if (blas()) {
-      const int one = 1;
-      strsv_("L", "N", "N", &nscol, values, &nsrow, y, &one);
-    } else {
-      FloatVector yd(y, nscol);
-      diagonal().triangularView<Eigen::Lower>().solveInPlace(yd);
-    }
-  }
-  // y = D^-T y (nscol).
-  void solve_transposed(float* y) const {
-    if (blas()) {
-      const int one = 1;
-      strsv_("L", "T", "N", &nscol, values, &nsrow, y, &one);
-    } else {
-      FloatVector yd(y, nscol);
-      diagonal().transpose().triangularView<Eigen::Upper>().solveInPlace(yd);
-    }
-  }
-  // t = B y (nb = below(), y nscol).
-  void below_times(const float* y, float* t) const {
-    if (blas()) {
-      const int one = 1, nb = below();
-      const float f1 = 1.0f, f0 = 0.0f;
-      sgemv_("N", &nb, &nscol, &f1, values + nscol, &nsrow, y, &one, &f0, t, &one);
-    } else {
-      FloatVector(t, below()).noalias() = rows_below() * Eigen::Map<const Eigen::VectorXf>(y, nscol);
-    }
-  }
-  // y -= B^T t (y nscol, t nb).
-  void subtract_below_transposed(const float* t, float* y) const {
-    if (blas()) {
-      const int one = 1, nb = below();
-      const float f1 = 1.0f, fm1 = -1.0f;
-      sgemv_("T", &nb, &nscol, &fm1, values + nscol, &nsrow, t, &one, &f1, y, &one);
-    } else {
-      FloatVector(y, nscol).noalias() -= rows_below().transpose() * Eigen::Map<const Eigen::VectorXf>(t, below());
-    }
-  }
-};
 
 // The longer part's work after dealing the subtrees `pieces` (their work `sub`), heaviest first, each to the part
 // with less so far; `bins` receives each piece's part.
@@ -111,6 +41,11 @@ void SupernodalSolvePlan::build(const SupernodalStructure& L) {
   std::vector<int> parent(nsz, -1);
   std::vector<double> cost(nsz, 0.0), sub(nsz, 0.0);  // entries of L: the supernode's, its subtree's
   m_first.resize(nsz);
+  m_px.assign(nsz + 1, 0);
+  for (int s = 0; s < ns; ++s) {
+    const int nscol = L.super[s + 1] - L.super[s], nsrow = L.pi[s + 1] - L.pi[s];
+    m_px[std::size_t(s) + 1] = m_px[std::size_t(s)] + long(nscol) * leading_dimension(nsrow);
+  }
   std::iota(m_first.begin(), m_first.end(), 0);
   std::vector<std::vector<int>> children(nsz);
   for (int s = 0; s < ns; ++s) {
@@ -172,45 +107,63 @@ void SupernodalSolvePlan::build(const SupernodalStructure& L) {
   }
 }
 
+int SupernodalSolvePlan::leading_dimension(int nsrow) {
+  return (nsrow + kSupernodePadding + 15) / 16 * 16;  // a whole number of 64-byte lines per column
+}
+
+void SupernodalSolvePlan::pack(const SupernodalStructure& L, const double* x, std::vector<float>& values) const {
+  values.assign(packed_size(), 0.0f);
+  for (int s = 0; s < L.nsuper; ++s) {
+    const int nscol = L.super[s + 1] - L.super[s], nsrow = L.pi[s + 1] - L.pi[s], ld = leading_dimension(nsrow);
+    for (int j = 0; j < nscol; ++j) {
+      const double* from = x + L.px[s] + std::ptrdiff_t(j) * nsrow;
+      float* to = values.data() + m_px[std::size_t(s)] + std::ptrdiff_t(j) * ld;
+      to[j] = float(1.0 / from[j]);  // the kernels multiply by the diagonal's reciprocal
+      for (int i = j + 1; i < nsrow; ++i) to[i] = float(from[i]);
+    }
+  }
+}
+
 void SupernodalSolvePlan::forward_range(const SupernodalStructure& L, const float* values, float* y, int first,
                                         int last, int root, Part* part) {
-  std::vector<float>& t = part ? part->t : m_t;
+  std::vector<float>& w = part ? part->t : m_t;
   for (int sn = first; sn <= last; ++sn) {
-    const int k1 = L.super[sn], nscol = L.super[sn + 1] - k1;
-    const Block b{values + L.px[sn], nscol, L.pi[sn + 1] - L.pi[sn]};
-    b.solve(y + k1);
-    const int nb = b.below();  // the rows below: t = B y_diag, then scattered
-    if (nb == 0) continue;
-    t.resize(std::size_t(nb));
-    b.below_times(y + k1, t.data());
+    const int k1 = L.super[sn], nscol = L.super[sn + 1] - k1, nsrow = L.pi[sn + 1] - L.pi[sn];
+    const int ld = leading_dimension(nsrow);
+    w.resize(std::size_t(ld));
+    std::copy(y + k1, y + k1 + nscol, w.begin());
+    std::fill(w.begin() + nscol, w.end(), 0.0f);
+    supernode_forward(values + m_px[std::size_t(sn)], nscol, nsrow, ld, w.data());
+    std::copy(w.begin(), w.begin() + nscol, y + k1);
+    const int nb = nsrow - nscol;  // the rows below hold -B y_diag, added to the rows they stand for
     const int* r = L.rows + L.pi[sn] + nscol;
+    const float* t = w.data() + nscol;
     if (part == nullptr) {
-      for (int i = 0; i < nb; ++i) y[r[i]] -= t[std::size_t(i)];
+      for (int i = 0; i < nb; ++i) y[r[i]] += t[i];
       continue;
     }
     // Rows in the subtree are the part's alone; the others are the top's, gathered per part.
     for (int i = 0; i < nb; ++i) {
       if (m_super_of[std::size_t(r[i])] <= root)
-        y[r[i]] -= t[std::size_t(i)];
+        y[r[i]] += t[i];
       else
-        part->updates[std::size_t(r[i])] += t[std::size_t(i)];
+        part->updates[std::size_t(r[i])] -= t[i];
     }
   }
 }
 
 void SupernodalSolvePlan::backward_range(const SupernodalStructure& L, const float* values, float* y, int first,
-                                         int last, std::vector<float>& t) {
+                                         int last, std::vector<float>& w) {
   for (int sn = last; sn >= first; --sn) {
-    const int k1 = L.super[sn], nscol = L.super[sn + 1] - k1;
-    const Block b{values + L.px[sn], nscol, L.pi[sn + 1] - L.pi[sn]};
-    const int nb = b.below();
-    if (nb > 0) {  // y_diag -= B^T y_below
-      const int* r = L.rows + L.pi[sn] + nscol;
-      t.resize(std::size_t(nb));
-      for (int i = 0; i < nb; ++i) t[std::size_t(i)] = y[r[i]];
-      b.subtract_below_transposed(t.data(), y + k1);
-    }
-    b.solve_transposed(y + k1);
+    const int k1 = L.super[sn], nscol = L.super[sn + 1] - k1, nsrow = L.pi[sn + 1] - L.pi[sn];
+    const int ld = leading_dimension(nsrow);
+    w.resize(std::size_t(ld));
+    std::copy(y + k1, y + k1 + nscol, w.begin());
+    const int* r = L.rows + L.pi[sn] + nscol;
+    for (int i = nscol; i < nsrow; ++i) w[std::size_t(i)] = y[r[i - nscol]];
+    std::fill(w.begin() + nsrow, w.end(), 0.0f);
+    supernode_backward(values + m_px[std::size_t(sn)], nscol, nsrow, ld, w.data());
+    std::copy(w.begin(), w.begin() + nscol, y + k1);
   }
 }
 

@@ -1,10 +1,11 @@
 #pragma once
-// Triangular solves with a supernodal Cholesky factor L (CHOLMOD's layout, single-precision values) on two threads.
+// Triangular solves with a supernodal Cholesky factor L (CHOLMOD's structure, single-precision values) on two threads.
 // Private to sim/src: the preconditioner's solves, which PCG applies once per iteration, are bound by the latency of
-// many small dense kernels, not by memory bandwidth (one core streams 20 GB/s here, the solves reach 9), so they gain
-// from a second core, and from kernels without a library call's overhead (Eigen's, inlined). The supernodal elimination tree is cut into disjoint subtrees, dealt to two parts of about
-// equal work, and the supernodes above them (the "top") are solved by one thread: in the forward solve after the
-// parts, in the backward solve before them.
+// many small dense kernels, not by memory bandwidth (one core streams 20 GB/s here, the solves reached 9 with Eigen's
+// and OpenBLAS's kernels), so they gain from a second core and from our own kernels (supernode_kernels.hpp: whole
+// 16-float vectors over columns padded with zeros, no call per supernode into a library). The supernodal elimination
+// tree is cut into disjoint subtrees, dealt to two parts of about equal work, and the supernodes above them (the
+// "top") are solved by one thread: in the forward solve after the parts, in the backward solve before them.
 #include <array>
 #include <vector>
 
@@ -25,15 +26,21 @@ struct SupernodalStructure {
   const int* rows = nullptr;   ///< row indices (pi[nsuper])
 };
 
-/// How the solves split the elimination tree between two threads, and the solves themselves. The arithmetic is the
-/// same whatever the executor's thread count (the parts' updates of the top columns are gathered per part and
+/// How the solves split the elimination tree between two threads, the layout of L's values that the solves read
+/// (each supernode's columns padded with zeros for whole vectors: supernode_kernels.hpp), and the solves themselves.
+/// The arithmetic is the same whatever the executor's thread count (the parts' updates of the top columns are gathered per part and
 /// applied in part order), so results are bit-identical with one thread and with two.
 class SupernodalSolvePlan {
  public:
   /// Partitions the tree of `L` (see the file comment): splits the heaviest subtree at its root while that shortens
   /// the longer part plus the top, in work counted as entries of L.
   void build(const SupernodalStructure& L);
-  /// y = L^-1 y in place (n), with L's values `values` (px[nsuper]).
+  /// L's values `x` (CHOLMOD's layout, px[nsuper]) in single precision in the solves' layout (packed_size()):
+  /// each column's rows, then zeros to the padded leading dimension; the diagonal blocks' upper triangles are zeros,
+  /// and each diagonal entry is stored as its reciprocal.
+  void pack(const SupernodalStructure& L, const double* x, std::vector<float>& values) const;
+  [[nodiscard]] std::size_t packed_size() const { return m_px.empty() ? 0 : std::size_t(m_px.back()); }
+  /// y = L^-1 y in place (n), with L's values `values` as pack() lays them out.
   void forward(const SupernodalStructure& L, const float* values, float* y, Executor* executor);
   /// y = L^-T y in place (n).
   void backward(const SupernodalStructure& L, const float* values, float* y, Executor* executor);
@@ -44,13 +51,15 @@ class SupernodalSolvePlan {
   struct Part {
     std::vector<int> roots;      ///< roots of the part's subtrees, ascending
     std::vector<float> updates;  ///< forward: the part's updates of top columns (n; zero between solves)
-    std::vector<float> t;        ///< work: the rows below a supernode
+    std::vector<float> t;        ///< work: a supernode's rows (its padded leading dimension)
   };
   void forward_range(const SupernodalStructure& L, const float* values, float* y, int first, int last, int root,
                      Part* part);
   void backward_range(const SupernodalStructure& L, const float* values, float* y, int first, int last,
                       std::vector<float>& t);
+  [[nodiscard]] static int leading_dimension(int nsrow);
 
+  std::vector<long> m_px;       ///< start of each supernode's values in the packed layout (nsuper + 1)
   std::vector<int> m_super_of;  ///< supernode of each column (n)
   std::vector<int> m_first;     ///< first supernode of each supernode's subtree (nsuper)
   std::vector<int> m_top;       ///< supernodes in no part's subtree, ascending

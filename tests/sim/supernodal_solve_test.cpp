@@ -5,11 +5,16 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <array>
+#include <bit>
+#include <cstdint>
 #include <limits>
+#include <random>
 
 #include "octocut/sim/linear_solver.hpp"
 #include "octocut/sim/parallel.hpp"
 #include "supernodal_solve.hpp"
+#include "supernode_kernels.hpp"
 
 namespace octocut::sim {
 namespace {
@@ -20,7 +25,7 @@ namespace {
 struct Arrow {
   Eigen::MatrixXd A;                    // the matrix (n x n)
   std::vector<int> super, pi, px, rows;  // the single-column supernodal structure of its factor
-  std::vector<float> values;            // the factor's entries, column by column
+  std::vector<double> values;           // the factor's entries, column by column (CHOLMOD's layout)
   int n = 0;
 };
 
@@ -49,7 +54,7 @@ Arrow arrow(int k, int s) {
         continue;
       }
       a.rows.push_back(i);
-      a.values.push_back(float(L(i, j)));
+      a.values.push_back(L(i, j));
     }
   }
   a.super.push_back(a.n);
@@ -72,7 +77,7 @@ Arrow arrow_with_dense_separator(int k, int s) {
   for (int i = 0; i < s; ++i) a.rows.push_back(first + i);
   for (int j = 0; j < s; ++j)
     for (int i = 0; i < s; ++i)
-      a.values.push_back(i >= j ? float(L(first + i, first + j)) : std::numeric_limits<float>::quiet_NaN());
+      a.values.push_back(i >= j ? L(first + i, first + j) : std::numeric_limits<double>::quiet_NaN());
   a.super.push_back(a.n);
   a.pi.push_back(int(a.rows.size()));
   a.px.push_back(int(a.values.size()));
@@ -103,8 +108,8 @@ TEST(SupernodalSolve, PartsAreTheIndependentSubtreesAndTheTopTheirSeparator) {
   EXPECT_EQ(w[2], separator);
 }
 
-// Small supernodes (the chains' single columns) and, in the second matrix, one large enough (120 x 120 = 14,400
-// entries) for the BLAS kernels: each solve against a dense solve of the matrix, and bit for bit on one thread and two.
+// Small supernodes (the chains' single columns) and, in the second matrix, a large one (120 x 120, whose upper
+// triangle holds NaN): each solve against a dense solve of the matrix, and bit for bit on one thread and two.
 class SupernodalSolves : public ::testing::TestWithParam<bool> {};
 
 TEST_P(SupernodalSolves, MatchADenseSolveOnOneThreadAndTwo) {
@@ -114,12 +119,14 @@ TEST_P(SupernodalSolves, MatchADenseSolveOnOneThreadAndTwo) {
   plan.build(L);
   const Eigen::VectorXd b = Eigen::VectorXd::LinSpaced(a.n, -1.0, 2.0);
   const Eigen::VectorXd exact = a.A.llt().solve(b);
+  std::vector<float> values;
+  plan.pack(L, a.values.data(), values);
   Executor one(1), two(2);
   std::vector<std::vector<float>> results;
   for (Executor* ex : {static_cast<Executor*>(nullptr), &one, &two}) {
     std::vector<float> y(b.data(), b.data() + b.size());
-    plan.forward(L, a.values.data(), y.data(), ex);
-    plan.backward(L, a.values.data(), y.data(), ex);
+    plan.forward(L, values.data(), y.data(), ex);
+    plan.backward(L, values.data(), y.data(), ex);
     double err = 0.0;
     for (int i = 0; i < a.n; ++i) err = std::max(err, std::abs(double(y[std::size_t(i)]) - exact[i]));
     EXPECT_LT(err, 1e-5 * exact.cwiseAbs().maxCoeff());  // single precision
@@ -134,6 +141,85 @@ INSTANTIATE_TEST_SUITE_P(SupernodalSolve, SupernodalSolves, ::testing::Bool(),
                          [](const ::testing::TestParamInfo<bool>& info) {
                            return info.param ? "WithADenseSeparator" : "SingleColumns";
                          });
+
+// The kernels' arithmetic, written out one float at a time in the order supernode_kernels.hpp defines (blocks of 8
+// columns; a dot product's 16 partial sums over rows j1 + l, j1 + 16 + l, ..., added by a tree of halves): the
+// kernels, in whichever clone this CPU runs (AVX-512, AVX2 or SSE2), must give the same bits. Supernodes of 1 to 50
+// columns and up to 201 rows, random entries, NaN in the upper triangles (never read).
+namespace kernel_order {
+constexpr int kBlock = 8, kLanes = 16;
+float at(const std::vector<float>& L, int ld, int i, int j) {
+  return L[std::size_t(j) * std::size_t(ld) + std::size_t(i)];
+}
+
+void forward(const std::vector<float>& L, int nscol, int nsrow, int ld, std::vector<float>& w) {
+  for (int j0 = 0; j0 < nscol; j0 += kBlock) {
+    const int nc = std::min(kBlock, nscol - j0), j1 = j0 + nc;
+    for (int j = j0; j < j1; ++j) {
+      w[std::size_t(j)] = w[std::size_t(j)] * at(L, ld, j, j);
+      for (int i = j + 1; i < j1; ++i) w[std::size_t(i)] = w[std::size_t(i)] - at(L, ld, i, j) * w[std::size_t(j)];
+    }
+    for (int i = j1; i < nsrow; ++i) {
+      float v = w[std::size_t(i)];
+      for (int q = 0; q < kBlock; ++q)
+        v = v - (q < nc ? at(L, ld, i, j0 + q) : at(L, ld, i, j0)) * (q < nc ? w[std::size_t(j0 + q)] : 0.0f);
+      w[std::size_t(i)] = v;
+    }
+  }
+}
+
+void backward(const std::vector<float>& L, int nscol, int nsrow, int ld, std::vector<float>& w) {
+  for (int j1 = nscol, nc = nscol % kBlock ? nscol % kBlock : kBlock; j1 > 0; j1 -= nc, nc = kBlock) {
+    const int j0 = j1 - nc;
+    float s[kBlock];
+    for (int q = 0; q < nc; ++q) {
+      float lane[kLanes] = {};
+      for (int i = j1; i < nsrow; i += kLanes)
+        for (int l = 0; l < kLanes; ++l)
+          lane[l] = lane[l] + (i + l < nsrow ? at(L, ld, i + l, j0 + q) * w[std::size_t(i + l)] : 0.0f);
+      for (int h = kLanes / 2; h >= 1; h /= 2)
+        for (int l = 0; l < h; ++l) lane[l] = lane[l] + lane[l + h];
+      s[q] = lane[0];
+    }
+    for (int q = nc - 1; q >= 0; --q) {
+      const int j = j0 + q;
+      float v = w[std::size_t(j)] - s[q];
+      for (int r = j + 1; r < j1; ++r) v = v - at(L, ld, r, j) * w[std::size_t(r)];
+      w[std::size_t(j)] = v * at(L, ld, j, j);
+    }
+  }
+}
+}  // namespace kernel_order
+
+TEST(SupernodalSolve, KernelsGiveTheBitsOfTheirDefinedOrderOnThisCpu) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> entry(-1.0f, 1.0f), diagonal(0.5f, 2.0f);
+  const std::array<std::pair<int, int>, 11> shapes{{{1, 1}, {1, 17}, {3, 3}, {3, 20}, {5, 40}, {8, 8}, {9, 31},
+                                                    {13, 70}, {24, 100}, {50, 50}, {37, 201}}};
+  for (const auto& [nscol, nsrow] : shapes) {
+    const int ld = (nsrow + kSupernodePadding + 15) / 16 * 16;
+    std::vector<float> L(std::size_t(nscol) * std::size_t(ld), 0.0f);
+    for (int j = 0; j < nscol; ++j)
+      for (int i = 0; i < nsrow; ++i)
+        L[std::size_t(j) * std::size_t(ld) + std::size_t(i)] =
+            i < j ? std::numeric_limits<float>::quiet_NaN() : (i == j ? diagonal(rng) : entry(rng));
+    std::vector<float> w(std::size_t(ld), 0.0f), b(std::size_t(ld), 0.0f);
+    for (int i = 0; i < nscol; ++i) w[std::size_t(i)] = entry(rng);
+    std::vector<float> expected = w;
+    supernode_forward(L.data(), nscol, nsrow, ld, w.data());
+    kernel_order::forward(L, nscol, nsrow, ld, expected);
+    for (int i = 0; i < ld; ++i)
+      ASSERT_EQ(std::bit_cast<std::uint32_t>(w[std::size_t(i)]), std::bit_cast<std::uint32_t>(expected[std::size_t(i)]))
+          << "forward, " << nscol << " x " << nsrow << ", row " << i;
+    for (int i = 0; i < nsrow; ++i) b[std::size_t(i)] = entry(rng);
+    expected = b;
+    supernode_backward(L.data(), nscol, nsrow, ld, b.data());
+    kernel_order::backward(L, nscol, nsrow, ld, expected);
+    for (int i = 0; i < ld; ++i)
+      ASSERT_EQ(std::bit_cast<std::uint32_t>(b[std::size_t(i)]), std::bit_cast<std::uint32_t>(expected[std::size_t(i)]))
+          << "backward, " << nscol << " x " << nsrow << ", row " << i;
+  }
+}
 
 // Through PCG with the lagged single-precision factor on a 3D Laplacian of 8,000 unknowns (its factor's tree splits):
 // the same iterates with no executor, one thread and two, each meeting the tolerance by the residual recomputed here.

@@ -18,15 +18,19 @@ typedef float Vec4 __attribute__((vector_size(16)));
 constexpr int kLanes = 16;
 constexpr int kBlock = 8;  // columns per pass over the rows below a block
 
-inline Vec16 load(const float* p) {
+// The helpers that take or return vectors are always inlined (at -O0 too): called, they would pass a vector by the
+// plain ABI to a clone that expects it in a wide register.
+#define OCTOCUT_VECTOR_HELPER inline __attribute__((always_inline))
+
+OCTOCUT_VECTOR_HELPER Vec16 load(const float* p) {
   Vec16 v;
   std::memcpy(&v, p, sizeof v);
   return v;
 }
-inline void store(float* p, Vec16 v) { std::memcpy(p, &v, sizeof v); }
+OCTOCUT_VECTOR_HELPER void store(float* p, Vec16 v) { std::memcpy(p, &v, sizeof v); }
 
 // The sum of the 16 lanes, always in this order: lane i + lane i + 8, then i + (i + 4), ... (a tree of halves).
-inline float lane_sum(Vec16 v) {
+OCTOCUT_VECTOR_HELPER float lane_sum(Vec16 v) {
   Vec8 a, b;
   std::memcpy(&a, &v, sizeof a);
   std::memcpy(&b, reinterpret_cast<const char*>(&v) + sizeof a, sizeof b);

@@ -89,12 +89,10 @@ struct LinearSolverOptions {
   int max_iterations = 200;    ///< pcg: iteration cap
   /// pcg with the lagged Cholesky preconditioner: how many more floating-point operations per second the supernodal
   /// factorisation does than the triangular solves of a PCG iteration. The factor is refreshed once the iterations
-  /// paid for its age cost as much as a factorisation (see make_linear_solver). Measured on `meniscus_punch` (7k
+  /// paid for its age cost as much as a factorisation (see make_linear_solver). Measured on the meniscus (7k
   /// unknowns, 2.3e8 operations per factorisation, 5.2e6 per iteration with the single-precision factor): a
-  /// background factorisation takes 17-29 ms (median 19) on the second thread, as long as 33 contact-step iterations
-  /// (0.58 ms each), so 45 / 33 = 1.4 for its whole time; the step loses only part of the second core to it, and the
-  /// scene's real-time factor is best at 2-4 (docs/RESULTS.md, "Supernodal solves with our own kernels").
-  double factor_flop_advantage = 2.0;
+  /// factorisation (49 ms, two threads) took as long as 58 iterations (0.85 ms each), so 44 / 58.
+  double factor_flop_advantage = 0.75;
   /// pcg with the lagged Cholesky preconditioner: solve with a single-precision copy of the factor (in single
   /// precision: the triangular solves are bound by the memory traffic of L, which this halves). The preconditioner
   /// is then the factor's value rounded to single precision, which converges in the same number of iterations.

@@ -32,6 +32,11 @@ double deal(const std::vector<int>& pieces, const std::vector<double>& sub, std:
 
 void SupernodalSolvePlan::build(const SupernodalStructure& L) {
   const int ns = L.nsuper;
+  m_px.assign(std::size_t(ns) + 1, 0);  // the packed layout: each supernode's columns at its leading dimension
+  for (int s = 0; s < ns; ++s) {
+    const int nscol = L.super[s + 1] - L.super[s], nsrow = L.pi[s + 1] - L.pi[s];
+    m_px[std::size_t(s) + 1] = m_px[std::size_t(s)] + long(nscol) * leading_dimension(nsrow);
+  }
   m_super_of.assign(std::size_t(L.n), 0);
   for (int s = 0; s < ns; ++s) std::fill(m_super_of.begin() + L.super[s], m_super_of.begin() + L.super[s + 1], s);
 
@@ -41,11 +46,6 @@ void SupernodalSolvePlan::build(const SupernodalStructure& L) {
   std::vector<int> parent(nsz, -1);
   std::vector<double> cost(nsz, 0.0), sub(nsz, 0.0);  // entries of L: the supernode's, its subtree's
   m_first.resize(nsz);
-  m_px.assign(nsz + 1, 0);
-  for (int s = 0; s < ns; ++s) {
-    const int nscol = L.super[s + 1] - L.super[s], nsrow = L.pi[s + 1] - L.pi[s];
-    m_px[std::size_t(s) + 1] = m_px[std::size_t(s)] + long(nscol) * leading_dimension(nsrow);
-  }
   std::iota(m_first.begin(), m_first.end(), 0);
   std::vector<std::vector<int>> children(nsz);
   for (int s = 0; s < ns; ++s) {
@@ -126,7 +126,7 @@ void SupernodalSolvePlan::pack(const SupernodalStructure& L, const double* x, st
 
 void SupernodalSolvePlan::forward_range(const SupernodalStructure& L, const float* values, float* y, int first,
                                         int last, int root, Part* part) {
-  std::vector<float>& w = part ? part->t : m_t;
+  std::vector<float>& w = part ? part->w : m_w;
   for (int sn = first; sn <= last; ++sn) {
     const int k1 = L.super[sn], nscol = L.super[sn + 1] - k1, nsrow = L.pi[sn + 1] - L.pi[sn];
     const int ld = leading_dimension(nsrow);
@@ -188,11 +188,11 @@ void SupernodalSolvePlan::forward(const SupernodalStructure& L, const float* val
 
 void SupernodalSolvePlan::backward(const SupernodalStructure& L, const float* values, float* y, Executor* executor) {
   // The top first (descending), then the parts' subtrees side by side: each reads only rows above it.
-  for (auto s = m_top.rbegin(); s != m_top.rend(); ++s) backward_range(L, values, y, *s, *s, m_t);
+  for (auto s = m_top.rbegin(); s != m_top.rend(); ++s) backward_range(L, values, y, *s, *s, m_w);
   const auto parts = [&](int b, int e) {
     for (int p = b; p < e; ++p)
       for (auto root = m_parts[std::size_t(p)].roots.rbegin(); root != m_parts[std::size_t(p)].roots.rend(); ++root)
-        backward_range(L, values, y, m_first[std::size_t(*root)], *root, m_parts[std::size_t(p)].t);
+        backward_range(L, values, y, m_first[std::size_t(*root)], *root, m_parts[std::size_t(p)].w);
   };
   if (executor != nullptr)
     executor->parallel_for(2, 1, parts);

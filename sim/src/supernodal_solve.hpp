@@ -28,8 +28,8 @@ struct SupernodalStructure {
 
 /// How the solves split the elimination tree between two threads, the layout of L's values that the solves read
 /// (each supernode's columns padded with zeros for whole vectors: supernode_kernels.hpp), and the solves themselves.
-/// The arithmetic is the same whatever the executor's thread count (the parts' updates of the top columns are gathered per part and
-/// applied in part order), so results are bit-identical with one thread and with two.
+/// The arithmetic is the same whatever the executor's thread count (the parts' updates of the top columns are
+/// gathered per part and applied in part order), so results are bit-identical with one thread and with two.
 class SupernodalSolvePlan {
  public:
   /// Partitions the tree of `L` (see the file comment): splits the heaviest subtree at its root while that shortens
@@ -51,12 +51,12 @@ class SupernodalSolvePlan {
   struct Part {
     std::vector<int> roots;      ///< roots of the part's subtrees, ascending
     std::vector<float> updates;  ///< forward: the part's updates of top columns (n; zero between solves)
-    std::vector<float> t;        ///< work: a supernode's rows (its padded leading dimension)
+    std::vector<float> w;        ///< work: a supernode's rows (its padded leading dimension)
   };
   void forward_range(const SupernodalStructure& L, const float* values, float* y, int first, int last, int root,
                      Part* part);
   void backward_range(const SupernodalStructure& L, const float* values, float* y, int first, int last,
-                      std::vector<float>& t);
+                      std::vector<float>& w);
   [[nodiscard]] static int leading_dimension(int nsrow);
 
   std::vector<long> m_px;       ///< start of each supernode's values in the packed layout (nsuper + 1)
@@ -65,7 +65,7 @@ class SupernodalSolvePlan {
   std::vector<int> m_top;       ///< supernodes in no part's subtree, ascending
   std::vector<int> m_top_cols;  ///< the columns of the top supernodes that the parts update, ascending
   std::array<Part, 2> m_parts;
-  std::vector<float> m_t;       ///< work of the top's solves
+  std::vector<float> m_w;       ///< work of the top's solves
   std::array<double, 3> m_work{};
 };
 

@@ -152,7 +152,10 @@ class CholmodFactor {
     cholmod_factorize(&a, m_L, &m_c);
     const bool ok = m_c.status >= CHOLMOD_OK && m_L->minor == m_L->n;
     if (ok && m_keep_single) {
-      m_plan.pack(structure(), static_cast<const double*>(m_L->x), m_single);
+      const auto* x = static_cast<const double*>(m_L->x);
+      const bool large = m_plan.packed_size() > m_half_above;
+      m_plan.pack(structure(), x, large, m_single);
+      if (large && !half_preconditions(A)) m_plan.pack(structure(), x, false, m_single);
     }
     return ok;
   }
@@ -163,11 +166,16 @@ class CholmodFactor {
   }
   /// The next analyses order with the better of AMD and nested dissection (LinearSolverOptions::thorough_ordering).
   void thorough_ordering(bool thorough) { m_thorough = thorough; }
-  /// Keeps a single-precision copy of each factor for solve_single.
-  void keep_single(bool keep) { m_keep_single = keep; }
-  /// x = (L L^T)^-1 b (in A's ordering) with the single-precision copy of the last factor, in double arithmetic:
-  /// the preconditioner of PCG, whose triangular solves are bound by the memory traffic of L. The solves run on two
-  /// of the executor's threads (SupernodalSolvePlan; the same result with one). False without a copy.
+  /// Keeps a copy of each factor for solve_single: in single precision, or in half precision when it has more than
+  /// `half_above` entries and passes the probe to `half_probe` (LinearSolverOptions::half_precision_entries).
+  void keep_single(bool keep, std::size_t half_above, double half_probe) {
+    m_keep_single = keep;
+    m_half_above = half_above;
+    m_half_probe = half_probe;
+  }
+  /// x = (L L^T)^-1 b (in A's ordering) with the single- or half-precision copy of the last factor, in single
+  /// arithmetic: the preconditioner of PCG. The solves run on two of the executor's threads (SupernodalSolvePlan;
+  /// the same result with one). False without a copy.
   bool solve_single(const VecX& b, VecX& x, Executor* executor) {
     if (m_L == nullptr || m_single.size() != m_plan.packed_size() || b.size() != Eigen::Index(m_L->n)) return false;
     const int n = int(m_L->n);
@@ -175,8 +183,8 @@ class CholmodFactor {
     m_perm.resize(std::size_t(n));
     for (int k = 0; k < n; ++k) m_perm[std::size_t(k)] = float(b[perm[k]]);
     const SupernodalStructure L = structure();
-    m_plan.forward(L, m_single.data(), m_perm.data(), executor);
-    m_plan.backward(L, m_single.data(), m_perm.data(), executor);
+    m_plan.forward(L, m_single, m_perm.data(), executor);
+    m_plan.backward(L, m_single, m_perm.data(), executor);
     x.resize(n);
     for (int k = 0; k < n; ++k) x[perm[k]] = double(m_perm[std::size_t(k)]);
     return true;
@@ -212,7 +220,26 @@ class CholmodFactor {
   void free_factor() {
     if (m_L) cholmod_free_factor(&m_L, &m_c);
     m_L = nullptr;
-    m_single.clear();
+    m_single = PackedFactor{};
+  }
+
+  // Whether the half-precision copy of the factor (m_single, just packed) preconditions its own matrix A well
+  // enough: |z - v| / |v| <= m_half_probe for z = (L~ L~^T)^-1 A v, L~ the copy and v a fixed vector of entries in
+  // [-1, 1). Half precision gives 5e-4 to 4e-3 on the meniscus (E = 2e5 Pa, nu = 0.45) and the cubes of `octocut
+  // bench scaling`, but 0.015-16 on stiffer tissue (the meniscus at base level 6 with E = 1e6-1e9 Pa, nu =
+  // 0.45-0.499), where it costs PCG up to 4.9 times the iterations of single precision (docs/RESULTS.md).
+  bool half_preconditions(const SpMat& A) {
+    const Eigen::Index n = A.cols();
+    VecX v(n), b = VecX::Zero(n), z;
+    for (Eigen::Index k = 0; k < n; ++k) v[k] = double((std::uint32_t(k) * 2654435761u) >> 16) / 32768.0 - 1.0;
+    for (Eigen::Index c = 0; c < n; ++c)  // A's lower triangle, as CHOLMOD reads it (view: stype -1)
+      for (SpMat::InnerIterator it(A, c); it; ++it) {
+        if (it.row() < c) continue;
+        b[it.row()] += it.value() * v[c];
+        if (it.row() > c) b[c] += it.value() * v[it.row()];
+      }
+    if (!solve_single(b, z, nullptr)) return false;
+    return (z - v).norm() <= m_half_probe * v.norm();
   }
 
   // The supernodal structure of the analysed factor.
@@ -351,7 +378,9 @@ class CholmodFactor {
   std::size_t m_default_nrelax[3] = {4, 16, 48};
   cholmod_factor* m_L = nullptr;
   bool m_keep_single = false;
-  std::vector<float> m_single;  ///< L's values in single precision, when kept (m_plan's packed layout)
+  std::size_t m_half_above = 0;  ///< entries above which the copy is in half precision (keep_single)
+  double m_half_probe = 0.0;     ///< the probe's tolerance (keep_single)
+  PackedFactor m_single;         ///< L's values in single or half precision, when kept (m_plan's packed layout)
   std::vector<float> m_perm;    ///< solve_single's permuted right-hand side (n)
   SupernodalSolvePlan m_plan;   ///< how solve_single splits its triangular solves between two threads
   cholmod_dense* m_x = nullptr;  ///< solve2 workspaces, kept
@@ -665,6 +694,7 @@ class PcgSolver final : public LinearSolver {
     if (o.preconditioner != "jacobi" && o.preconditioner != "cholesky")
       throw std::invalid_argument("unknown preconditioner '" + o.preconditioner + "'");
     if (o.factor_lag_solves < 0) throw std::invalid_argument("factor_lag_solves must be >= 0");
+    if (!(o.half_precision_probe >= 0.0)) throw std::invalid_argument("half_precision_probe must be >= 0");
   }
   ~PcgSolver() override { drop_pending(); }  // a cut replaces the solver: it does not wait for the refresh
   PcgSolver(const PcgSolver&) = delete;
@@ -678,7 +708,7 @@ class PcgSolver final : public LinearSolver {
     drop_pending();
     m_pending_in = -1;
     if (m_use_cholesky) {
-      m_front->keep_single(m_single);
+      m_front->keep_single(m_single, m_opt.half_precision_entries, m_opt.half_precision_probe);
       m_front->thorough_ordering(m_opt.thorough_ordering);
       if (m_opt.factor_lag_solves > 0)
         m_front->clear();
@@ -823,7 +853,7 @@ class PcgSolver final : public LinearSolver {
     m_pending = std::make_unique<BackgroundFactorization>();
     m_pending->A = m_A->matrix();
     m_pending->factor = m_back ? std::move(m_back) : std::make_unique<CholmodFactor>();
-    m_pending->factor->keep_single(m_single);
+    m_pending->factor->keep_single(m_single, m_opt.half_precision_entries, m_opt.half_precision_probe);
     m_pending->factor->thorough_ordering(m_opt.thorough_ordering);
     m_pending->fast = m_fast_now;
     m_pending->rotations = m_rotations_now;

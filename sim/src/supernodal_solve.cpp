@@ -1,6 +1,7 @@
 #include "supernodal_solve.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <numeric>
 
 #include "octocut/sim/parallel.hpp"
@@ -111,21 +112,59 @@ int SupernodalSolvePlan::leading_dimension(int nsrow) {
   return (nsrow + kSupernodePadding + 15) / 16 * 16;  // a whole number of 64-byte lines per column
 }
 
-void SupernodalSolvePlan::pack(const SupernodalStructure& L, const double* x, std::vector<float>& values) const {
-  values.assign(packed_size(), 0.0f);
+void SupernodalSolvePlan::pack(const SupernodalStructure& L, const double* x, bool half, PackedFactor& packed) const {
+  if (half) {
+    std::vector<float>().swap(packed.values);
+    packed.codes.assign(packed_size(), 0);
+  } else {
+    std::vector<std::uint16_t>().swap(packed.codes);
+    packed.values.assign(packed_size(), 0.0f);
+  }
+  packed.diag_inv.assign(std::size_t(L.n), 0.0f);
+  packed.scale.assign(std::size_t(L.n), 1.0f);
   for (int s = 0; s < L.nsuper; ++s) {
     const int nscol = L.super[s + 1] - L.super[s], nsrow = L.pi[s + 1] - L.pi[s], ld = leading_dimension(nsrow);
     for (int j = 0; j < nscol; ++j) {
       const double* from = x + L.px[s] + std::ptrdiff_t(j) * nsrow;
-      float* to = values.data() + m_px[std::size_t(s)] + std::ptrdiff_t(j) * ld;
-      to[j] = float(1.0 / from[j]);  // the kernels multiply by the diagonal's reciprocal
-      for (int i = j + 1; i < nsrow; ++i) to[i] = float(from[i]);
+      const std::ptrdiff_t at = m_px[std::size_t(s)] + std::ptrdiff_t(j) * ld;
+      const auto col = std::size_t(L.super[s] + j);
+      packed.diag_inv[col] = float(1.0 / from[j]);  // the kernels multiply by the diagonal's reciprocal
+      if (!half) {
+        for (int i = j + 1; i < nsrow; ++i) packed.values[std::size_t(at + i)] = float(from[i]);
+        continue;
+      }
+      double largest = 0.0;
+      for (int i = j + 1; i < nsrow; ++i) largest = std::max(largest, std::abs(from[i]));
+      // The scale 2^k puts the largest entry in [2^14, 2^15) (half precision's largest normal: 65504), within
+      // single precision's range.
+      const int k = largest > 0.0 ? std::clamp(std::ilogb(largest) - 14, -126, 127) : 0;
+      packed.scale[col] = std::ldexp(1.0f, k);
+      for (int i = j + 1; i < nsrow; ++i) packed.codes[std::size_t(at + i)] = half_code(std::ldexp(from[i], -k));
     }
   }
 }
 
-void SupernodalSolvePlan::forward_range(const SupernodalStructure& L, const float* values, float* y, int first,
-                                        int last, int root, Part* part) {
+std::vector<double> SupernodalSolvePlan::unpack(const SupernodalStructure& L, const PackedFactor& packed) const {
+  std::vector<double> x(std::size_t(L.px[L.nsuper]), 0.0);
+  for (int s = 0; s < L.nsuper; ++s) {
+    const int nscol = L.super[s + 1] - L.super[s], nsrow = L.pi[s + 1] - L.pi[s], ld = leading_dimension(nsrow);
+    for (int j = 0; j < nscol; ++j) {
+      double* to = x.data() + L.px[s] + std::ptrdiff_t(j) * nsrow;
+      const std::ptrdiff_t at = m_px[std::size_t(s)] + std::ptrdiff_t(j) * ld;
+      const auto col = std::size_t(L.super[s] + j);
+      to[j] = 1.0 / double(packed.diag_inv[col]);
+      for (int i = j + 1; i < nsrow; ++i) {
+        const auto k = std::size_t(at + i);
+        const float stored = packed.half() ? half_value(packed.codes[k]) : packed.values[k];
+        to[i] = double(stored) * double(packed.scale[col]);
+      }
+    }
+  }
+  return x;
+}
+
+void SupernodalSolvePlan::forward_range(const SupernodalStructure& L, const PackedFactor& packed, float* y,
+                                        int first, int last, int root, Part* part) {
   std::vector<float>& w = part ? part->w : m_w;
   for (int sn = first; sn <= last; ++sn) {
     const int k1 = L.super[sn], nscol = L.super[sn + 1] - k1, nsrow = L.pi[sn + 1] - L.pi[sn];
@@ -133,7 +172,12 @@ void SupernodalSolvePlan::forward_range(const SupernodalStructure& L, const floa
     w.resize(std::size_t(ld));
     std::copy(y + k1, y + k1 + nscol, w.begin());
     std::fill(w.begin() + nscol, w.end(), 0.0f);
-    supernode_forward(values + m_px[std::size_t(sn)], nscol, nsrow, ld, w.data());
+    if (packed.half())
+      supernode_forward(packed.codes.data() + m_px[std::size_t(sn)], packed.diag_inv.data() + k1,
+                        packed.scale.data() + k1, nscol, nsrow, ld, w.data());
+    else
+      supernode_forward(packed.values.data() + m_px[std::size_t(sn)], packed.diag_inv.data() + k1,
+                        packed.scale.data() + k1, nscol, nsrow, ld, w.data());
     std::copy(w.begin(), w.begin() + nscol, y + k1);
     const int nb = nsrow - nscol;  // the rows below hold -B y_diag, added to the rows they stand for
     const int* r = L.rows + L.pi[sn] + nscol;
@@ -152,8 +196,8 @@ void SupernodalSolvePlan::forward_range(const SupernodalStructure& L, const floa
   }
 }
 
-void SupernodalSolvePlan::backward_range(const SupernodalStructure& L, const float* values, float* y, int first,
-                                         int last, std::vector<float>& w) {
+void SupernodalSolvePlan::backward_range(const SupernodalStructure& L, const PackedFactor& packed, float* y,
+                                         int first, int last, std::vector<float>& w) {
   for (int sn = last; sn >= first; --sn) {
     const int k1 = L.super[sn], nscol = L.super[sn + 1] - k1, nsrow = L.pi[sn + 1] - L.pi[sn];
     const int ld = leading_dimension(nsrow);
@@ -162,17 +206,23 @@ void SupernodalSolvePlan::backward_range(const SupernodalStructure& L, const flo
     const int* r = L.rows + L.pi[sn] + nscol;
     for (int i = nscol; i < nsrow; ++i) w[std::size_t(i)] = y[r[i - nscol]];
     std::fill(w.begin() + nsrow, w.end(), 0.0f);
-    supernode_backward(values + m_px[std::size_t(sn)], nscol, nsrow, ld, w.data());
+    if (packed.half())
+      supernode_backward(packed.codes.data() + m_px[std::size_t(sn)], packed.diag_inv.data() + k1,
+                         packed.scale.data() + k1, nscol, nsrow, ld, w.data());
+    else
+      supernode_backward(packed.values.data() + m_px[std::size_t(sn)], packed.diag_inv.data() + k1,
+                         packed.scale.data() + k1, nscol, nsrow, ld, w.data());
     std::copy(w.begin(), w.begin() + nscol, y + k1);
   }
 }
 
-void SupernodalSolvePlan::forward(const SupernodalStructure& L, const float* values, float* y, Executor* executor) {
+void SupernodalSolvePlan::forward(const SupernodalStructure& L, const PackedFactor& packed, float* y,
+                                  Executor* executor) {
   // The parts' subtrees, side by side; then their updates of the top, in part order; then the top.
   const auto parts = [&](int b, int e) {
     for (int p = b; p < e; ++p)
       for (const int root : m_parts[std::size_t(p)].roots)
-        forward_range(L, values, y, m_first[std::size_t(root)], root, root, &m_parts[std::size_t(p)]);
+        forward_range(L, packed, y, m_first[std::size_t(root)], root, root, &m_parts[std::size_t(p)]);
   };
   if (executor != nullptr)
     executor->parallel_for(2, 1, parts);
@@ -183,16 +233,17 @@ void SupernodalSolvePlan::forward(const SupernodalStructure& L, const float* val
       y[j] -= p.updates[std::size_t(j)];
       p.updates[std::size_t(j)] = 0.0f;
     }
-  for (const int s : m_top) forward_range(L, values, y, s, s, -1, nullptr);
+  for (const int s : m_top) forward_range(L, packed, y, s, s, -1, nullptr);
 }
 
-void SupernodalSolvePlan::backward(const SupernodalStructure& L, const float* values, float* y, Executor* executor) {
+void SupernodalSolvePlan::backward(const SupernodalStructure& L, const PackedFactor& packed, float* y,
+                                   Executor* executor) {
   // The top first (descending), then the parts' subtrees side by side: each reads only rows above it.
-  for (auto s = m_top.rbegin(); s != m_top.rend(); ++s) backward_range(L, values, y, *s, *s, m_w);
+  for (auto s = m_top.rbegin(); s != m_top.rend(); ++s) backward_range(L, packed, y, *s, *s, m_w);
   const auto parts = [&](int b, int e) {
     for (int p = b; p < e; ++p)
       for (auto root = m_parts[std::size_t(p)].roots.rbegin(); root != m_parts[std::size_t(p)].roots.rend(); ++root)
-        backward_range(L, values, y, m_first[std::size_t(*root)], *root, m_parts[std::size_t(p)].w);
+        backward_range(L, packed, y, m_first[std::size_t(*root)], *root, m_parts[std::size_t(p)].w);
   };
   if (executor != nullptr)
     executor->parallel_for(2, 1, parts);

@@ -1,5 +1,6 @@
 #pragma once
-// Triangular solves with a supernodal Cholesky factor L (CHOLMOD's structure, single-precision values) on two threads.
+// Triangular solves with a supernodal Cholesky factor L (CHOLMOD's structure; values stored in half precision with a
+// power-of-two scale per column, arithmetic in single precision) on two threads.
 // Private to sim/src: the preconditioner's solves, which PCG applies once per iteration, are bound by the latency of
 // many small dense kernels, not by memory bandwidth (one core streams 20 GB/s here, the solves reached 9 with Eigen's
 // and OpenBLAS's kernels), so they gain from a second core and from our own kernels (supernode_kernels.hpp: whole
@@ -7,6 +8,7 @@
 // tree is cut into disjoint subtrees, dealt to two parts of about equal work, and the supernodes above them (the
 // "top") are solved by one thread: in the forward solve after the parts, in the backward solve before them.
 #include <array>
+#include <cstdint>
 #include <vector>
 
 namespace octocut::sim {
@@ -26,6 +28,17 @@ struct SupernodalStructure {
   const int* rows = nullptr;   ///< row indices (pi[nsuper])
 };
 
+/// L's values as the solves read them (SupernodalSolvePlan::pack; the encodings: supernode_kernels.hpp): in single
+/// precision, or in half precision with a scale per column.
+struct PackedFactor {
+  std::vector<float> values;         ///< single precision: each supernode's columns at its padded leading dimension
+  std::vector<std::uint16_t> codes;  ///< half precision: the same layout
+  std::vector<float> diag_inv;       ///< the reciprocal of each column's diagonal entry (n)
+  std::vector<float> scale;          ///< each column's scale, a power of two (n; all 1 in single precision)
+  [[nodiscard]] bool half() const { return !codes.empty(); }
+  [[nodiscard]] std::size_t size() const { return half() ? codes.size() : values.size(); }
+};
+
 /// How the solves split the elimination tree between two threads, the layout of L's values that the solves read
 /// (each supernode's columns padded with zeros for whole vectors: supernode_kernels.hpp), and the solves themselves.
 /// The arithmetic is the same whatever the executor's thread count (the parts' updates of the top columns are
@@ -35,15 +48,18 @@ class SupernodalSolvePlan {
   /// Partitions the tree of `L` (see the file comment): splits the heaviest subtree at its root while that shortens
   /// the longer part plus the top, in work counted as entries of L.
   void build(const SupernodalStructure& L);
-  /// L's values `x` (CHOLMOD's layout, px[nsuper]) in single precision in the solves' layout (packed_size()):
-  /// each column's rows, then zeros to the padded leading dimension; the diagonal blocks' upper triangles are zeros,
-  /// and each diagonal entry is stored as its reciprocal.
-  void pack(const SupernodalStructure& L, const double* x, std::vector<float>& values) const;
+  /// L's values `x` (CHOLMOD's layout, px[nsuper]) in the solves' layout, in half precision if `half`, else in
+  /// single: each column's entries below the diagonal (packed_size() in all), then zeros to the padded leading
+  /// dimension; the diagonal blocks' upper triangles and diagonals are zeros; the diagonal entries' reciprocals and
+  /// the columns' scales apart.
+  void pack(const SupernodalStructure& L, const double* x, bool half, PackedFactor& packed) const;
+  /// The values the solves use, in CHOLMOD's layout (px[nsuper], the upper triangles zero): what pack() kept of x.
+  [[nodiscard]] std::vector<double> unpack(const SupernodalStructure& L, const PackedFactor& packed) const;
   [[nodiscard]] std::size_t packed_size() const { return m_px.empty() ? 0 : std::size_t(m_px.back()); }
-  /// y = L^-1 y in place (n), with L's values `values` as pack() lays them out.
-  void forward(const SupernodalStructure& L, const float* values, float* y, Executor* executor);
+  /// y = L^-1 y in place (n), with L's values as pack() gave them.
+  void forward(const SupernodalStructure& L, const PackedFactor& packed, float* y, Executor* executor);
   /// y = L^-T y in place (n).
-  void backward(const SupernodalStructure& L, const float* values, float* y, Executor* executor);
+  void backward(const SupernodalStructure& L, const PackedFactor& packed, float* y, Executor* executor);
   /// Entries of L in each part's subtrees and in the top (for tests and benchmarks).
   [[nodiscard]] std::array<double, 3> work() const { return m_work; }
 
@@ -53,9 +69,9 @@ class SupernodalSolvePlan {
     std::vector<float> updates;  ///< forward: the part's updates of top columns (n; zero between solves)
     std::vector<float> w;        ///< work: a supernode's rows (its padded leading dimension)
   };
-  void forward_range(const SupernodalStructure& L, const float* values, float* y, int first, int last, int root,
-                     Part* part);
-  void backward_range(const SupernodalStructure& L, const float* values, float* y, int first, int last,
+  void forward_range(const SupernodalStructure& L, const PackedFactor& packed, float* y, int first, int last,
+                     int root, Part* part);
+  void backward_range(const SupernodalStructure& L, const PackedFactor& packed, float* y, int first, int last,
                       std::vector<float>& w);
   [[nodiscard]] static int leading_dimension(int nsrow);
 

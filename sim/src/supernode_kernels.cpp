@@ -1,12 +1,20 @@
 #include "supernode_kernels.hpp"
 
-// Compiled with -ffp-contract=off (sim/CMakeLists.txt), like the element kernel: no clone fuses a multiply-add. The
-// arithmetic is written on 16-float vectors (GCC's vector extension), which each clone maps onto its own registers
-// (one AVX-512 register, two AVX2 ones, four SSE2 ones) lane by lane, and every sum is in an order fixed by this code
-// (the dot products' 16 partial sums and the tree that adds them), so every clone gives the same bits.
+// Compiled with -ffp-contract=off (sim/CMakeLists.txt), like the element kernel: no copy fuses a multiply-add. The
+// arithmetic is written on 16-float vectors (GCC's vector extension), which each copy (supernode_kernels_body.inc,
+// compiled once per instruction set) maps onto its own registers (one AVX-512 register, two AVX2 ones, four SSE2
+// ones) lane by lane, and every sum is in an order fixed by this code (the dot products' 16 partial sums and the tree
+// that adds them); half precision's codes are widened to floats exactly. So every copy gives the same bits.
 
+#include <cmath>
 #include <cstddef>
 #include <cstring>
+#include <vector>
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <cpuid.h>
+#include <immintrin.h>
+#endif
 
 namespace octocut::sim {
 
@@ -15,98 +23,134 @@ namespace {
 typedef float Vec16 __attribute__((vector_size(64)));
 typedef float Vec8 __attribute__((vector_size(32)));
 typedef float Vec4 __attribute__((vector_size(16)));
+typedef std::uint16_t Code16 __attribute__((vector_size(32)));
+typedef std::uint32_t Bits16 __attribute__((vector_size(64)));
 constexpr int kLanes = 16;
 constexpr int kBlock = 8;  // columns per pass over the rows below a block
 
 // The helpers that take or return vectors are always inlined (at -O0 too): called, they would pass a vector by the
-// plain ABI to a clone that expects it in a wide register.
+// plain ABI to a copy that expects it in a wide register.
 #define OCTOCUT_VECTOR_HELPER inline __attribute__((always_inline))
 
-OCTOCUT_VECTOR_HELPER Vec16 load(const float* p) {
-  Vec16 v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
-OCTOCUT_VECTOR_HELPER void store(float* p, Vec16 v) { std::memcpy(p, &v, sizeof v); }
-
-// The sum of the 16 lanes, always in this order: lane i + lane i + 8, then i + (i + 4), ... (a tree of halves).
-OCTOCUT_VECTOR_HELPER float lane_sum(Vec16 v) {
-  Vec8 a, b;
-  std::memcpy(&a, &v, sizeof a);
-  std::memcpy(&b, reinterpret_cast<const char*>(&v) + sizeof a, sizeof b);
-  const Vec8 s8 = a + b;
-  Vec4 c, d;
-  std::memcpy(&c, &s8, sizeof c);
-  std::memcpy(&d, reinterpret_cast<const char*>(&s8) + sizeof c, sizeof d);
-  const Vec4 s4 = c + d;
-  const float s0 = s4[0] + s4[2], s1 = s4[1] + s4[3];
-  return s0 + s1;
-}
+inline float entry_value(float v) { return v; }
+inline float entry_value(std::uint16_t code) { return half_value(code); }
 
 // The columns of the block [j0, j0 + nc): a partial block (nc < kBlock) repeats its first column (whose x is 0 in
 // the forward solve; in the backward one its sums go unused).
-inline void block_columns(const float* L, int j0, int nc, int ld, const float* (&c)[kBlock]) {
+template <class Entry>
+inline void block_columns(const Entry* L, int j0, int nc, int ld, const Entry* (&c)[kBlock]) {
   for (int q = 0; q < kBlock; ++q) c[q] = L + std::ptrdiff_t(j0 + (q < nc ? q : 0)) * ld;
+}
+
+// One copy of the kernels per instruction set, each widening half precision's codes its own way: AVX-512 and AVX2 +
+// F16C with the hardware's conversion (vcvtph2ps), the others with integer operations (half_value, lane by lane);
+// both exact. (GCC 12 converts vectors of _Float16 one lane at a time, so the vector extension cannot do it.)
+#if defined(__x86_64__) && defined(__GNUC__)
+#define OCTOCUT_KERNEL_TARGET __attribute__((target("avx512f")))
+namespace avx512 {
+#if !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"  // GCC 12's _mm512_cvtph_ps starts from an undefined vector
+#endif
+OCTOCUT_VECTOR_HELPER OCTOCUT_KERNEL_TARGET Vec16 load_entries(const std::uint16_t* p) {
+  const __m512 f = _mm512_cvtph_ps(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(p)));
+  Vec16 v;
+  std::memcpy(&v, &f, sizeof v);
+  return v;
+}
+#if !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
+#include "supernode_kernels_body.inc"
+}  // namespace avx512
+#undef OCTOCUT_KERNEL_TARGET
+
+#define OCTOCUT_KERNEL_TARGET __attribute__((target("avx2,f16c")))
+namespace avx2 {
+OCTOCUT_VECTOR_HELPER OCTOCUT_KERNEL_TARGET Vec16 load_entries(const std::uint16_t* p) {
+  const __m256 lo = _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
+  const __m256 hi = _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p + 8)));
+  Vec16 v;
+  std::memcpy(&v, &lo, sizeof lo);
+  std::memcpy(reinterpret_cast<char*>(&v) + sizeof lo, &hi, sizeof hi);
+  return v;
+}
+#include "supernode_kernels_body.inc"
+}  // namespace avx2
+#undef OCTOCUT_KERNEL_TARGET
+#endif
+
+#define OCTOCUT_KERNEL_TARGET
+namespace generic {
+OCTOCUT_VECTOR_HELPER OCTOCUT_KERNEL_TARGET Vec16 load_entries(const std::uint16_t* p) {
+  Code16 c;
+  std::memcpy(&c, p, sizeof c);
+  const Bits16 u = __builtin_convertvector(c, Bits16);
+  const Bits16 magnitude = (u & 0x7fffu) << 13;
+  const Bits16 bits = ((magnitude + 0x38000000u) & Bits16(magnitude != 0u)) | ((u & 0x8000u) << 16);
+  Vec16 v;
+  std::memcpy(&v, &bits, sizeof v);
+  return v;
+}
+#include "supernode_kernels_body.inc"
+}  // namespace generic
+#undef OCTOCUT_KERNEL_TARGET
+
+// The copies this CPU runs, the widest first (chosen once).
+std::vector<SupernodeKernelCopy> copies_here() {
+  std::vector<SupernodeKernelCopy> out;
+#if defined(__x86_64__) && defined(__GNUC__)
+  __builtin_cpu_init();
+  if (__builtin_cpu_supports("avx512f"))
+    out.push_back({"avx512", avx512::forward<float>, avx512::backward<float>, avx512::forward<std::uint16_t>,
+                   avx512::backward<std::uint16_t>});
+  unsigned eax = 0, ebx = 0, ecx = 0, edx = 0;
+  const bool f16c = __get_cpuid(1, &eax, &ebx, &ecx, &edx) && (ecx & bit_F16C) != 0;
+  if (__builtin_cpu_supports("avx2") && f16c)
+    out.push_back({"avx2", avx2::forward<float>, avx2::backward<float>, avx2::forward<std::uint16_t>,
+                   avx2::backward<std::uint16_t>});
+#endif
+  out.push_back({"generic", generic::forward<float>, generic::backward<float>, generic::forward<std::uint16_t>,
+                 generic::backward<std::uint16_t>});
+  return out;
+}
+const SupernodeKernelCopy& kernels() {
+  static const SupernodeKernelCopy k = copies_here().front();
+  return k;
 }
 
 }  // namespace
 
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-__attribute__((target_clones("avx512f", "avx2", "default")))
-#endif
-void supernode_forward(const float* __restrict L, int nscol, int nsrow, int ld, float* __restrict w) {
-  for (int j0 = 0; j0 < nscol; j0 += kBlock) {
-    const int nc = nscol - j0 < kBlock ? nscol - j0 : kBlock, j1 = j0 + nc;
-    // The block's own triangle, column by column.
-    for (int j = j0; j < j1; ++j) {
-      const float* c = L + std::ptrdiff_t(j) * ld;
-      w[j] = w[j] * c[j];  // c[j]: the reciprocal of the diagonal entry
-      for (int i = j + 1; i < j1; ++i) w[i] = w[i] - c[i] * w[j];
-    }
-    // The rows below it: w_i = (((w_i - L_i,j0 w_j0) - L_i,j0+1 w_j0+1) - ...), every row alike. A partial block's
-    // repeated column has x = 0: subtracting 0 changes no value. The columns and w are padded with zeros to ld >=
-    // nsrow + 15, so the last vector reads and writes only zeros past nsrow.
-    const float* c[kBlock];
-    block_columns(L, j0, nc, ld, c);
-    float x[kBlock];
-    for (int q = 0; q < kBlock; ++q) x[q] = q < nc ? w[j0 + q] : 0.0f;
-    for (int i = j1; i < nsrow; i += kLanes) {
-      Vec16 v = load(w + i);
-#pragma GCC unroll 8
-      for (int q = 0; q < kBlock; ++q) v = v - load(c[q] + i) * x[q];
-      store(w + i, v);
-    }
-  }
+std::vector<SupernodeKernelCopy> supernode_kernel_copies() { return copies_here(); }
+
+std::uint16_t half_code(double v) {
+  const double a = std::abs(v);
+  if (!(a >= 0x1p-14)) return 0;  // below the smallest normal half (and NaN, which pack never gives)
+  int e = std::ilogb(a);          // a in [2^e, 2^(e + 1))
+  const double q = std::ldexp(1.0, e - 10);
+  const double r = std::nearbyint(a / q) * q;  // 11 significant bits, ties to even
+  e = std::ilogb(r);                           // rounding may carry into the next binade
+  const auto fraction = std::uint32_t(std::ldexp(r, -e) * 1024.0 - 1024.0);
+  const std::uint32_t code = (std::uint32_t(e + 15) << 10) | fraction | (v < 0.0 ? 0x8000u : 0u);
+  return std::uint16_t(code);
 }
 
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-__attribute__((target_clones("avx512f", "avx2", "default")))
-#endif
-void supernode_backward(const float* __restrict L, int nscol, int nsrow, int ld, float* __restrict w) {
-  const int last = nscol % kBlock == 0 ? kBlock : nscol % kBlock;  // the last block is the partial one
-  for (int j1 = nscol, nc = last; j1 > 0; j1 -= nc, nc = kBlock) {
-    const int j0 = j1 - nc;
-    // s_q = L(j1:, j0 + q) . w(j1:) for the block's columns: 16 partial sums each (the zeros past nsrow add
-    // nothing), then the tree of halves.
-    const float* c[kBlock];
-    block_columns(L, j0, nc, ld, c);
-    Vec16 a[kBlock] = {};
-    for (int i = j1; i < nsrow; i += kLanes) {
-      const Vec16 v = load(w + i);
-#pragma GCC unroll 8
-      for (int q = 0; q < kBlock; ++q) a[q] = a[q] + load(c[q] + i) * v;
-    }
-    float s[kBlock];
-#pragma GCC unroll 8
-    for (int q = 0; q < kBlock; ++q) s[q] = lane_sum(a[q]);
-    // The block's own triangle, backwards.
-    for (int q = nc - 1; q >= 0; --q) {
-      const int j = j0 + q;
-      float v = w[j] - s[q];
-      for (int r = j + 1; r < j1; ++r) v = v - c[q][r] * w[r];
-      w[j] = v * c[q][j];
-    }
-  }
+void supernode_forward(const float* L, const float* diag_inv, const float* scale, int nscol, int nsrow, int ld,
+                       float* w) {
+  kernels().forward(L, diag_inv, scale, nscol, nsrow, ld, w);
+}
+void supernode_forward(const std::uint16_t* L, const float* diag_inv, const float* scale, int nscol, int nsrow, int ld,
+                       float* w) {
+  kernels().forward_half(L, diag_inv, scale, nscol, nsrow, ld, w);
+}
+
+void supernode_backward(const float* L, const float* diag_inv, const float* scale, int nscol, int nsrow, int ld,
+                        float* w) {
+  kernels().backward(L, diag_inv, scale, nscol, nsrow, ld, w);
+}
+void supernode_backward(const std::uint16_t* L, const float* diag_inv, const float* scale, int nscol, int nsrow,
+                        int ld, float* w) {
+  kernels().backward_half(L, diag_inv, scale, nscol, nsrow, ld, w);
 }
 
 }  // namespace octocut::sim

@@ -263,6 +263,45 @@ TEST(LinearSolver, PcgSinglePrecisionFactorConvergesLikeTheDoubleOne) {
   }
 }
 
+// A factor above half_precision_entries is copied in half precision when that copy solves its own matrix to within
+// half_precision_probe: on a Laplacian (probe 1.4e-4) PCG then needs more iterations than with the single-precision
+// copy on the factor's own matrix at a tight tolerance (the copy is visibly the half one), and still converges (the
+// residual recomputed here). A stiff, nearly incompressible FEM system (E = 1e9 Pa, nu = 0.499, B-bar; probe 0.094)
+// fails the probe and keeps single precision: as many iterations as with the copy forced to single precision, where
+// the half copy let through costs twice as many.
+TEST(LinearSolver, PcgKeepsTheFactorInHalfPrecisionOnlyWhereItPreconditions) {
+  MaterialParams stiff;
+  stiff.young_modulus = 1e9;
+  stiff.poisson_ratio = 0.499;
+  const ObjectModel m = test::box_model({Vec3(0, 0, 0), Vec3(1, 1, 1)}, Vec3(0, 0, 0), 1.0, 3, {}, {}, stiff);
+  const SpMat soft = laplacian(12, 0.05), hard = implicit_systems(m, {1e-2})[0];
+  // The iterations of a solve of A with its own fresh factor, and its residual recomputed.
+  const auto iterations = [](const SpMat& A, std::size_t half_above, double probe) {
+    LinearSolverOptions o;
+    o.tolerance = 1e-10;
+    o.half_precision_entries = half_above;
+    o.half_precision_probe = probe;
+    auto s = make_linear_solver("pcg", o);
+    s->analyze_pattern(A);
+    EXPECT_TRUE(s->factorize(A));
+    const VecX b = VecX::LinSpaced(A.rows(), -1.0, 2.0);
+    VecX x = VecX::Zero(A.rows());
+    const SolveInfo info = s->solve(b, x);
+    EXPECT_TRUE(info.ok);
+    EXPECT_LE((b - A * x).norm() / b.norm(), 1e-10);
+    return info.iterations;
+  };
+  const std::size_t never = std::numeric_limits<std::size_t>::max();
+  const double probe = LinearSolverOptions{}.half_precision_probe;
+  const int soft_single = iterations(soft, never, probe), soft_half = iterations(soft, 0, probe);
+  const int hard_single = iterations(hard, never, probe), hard_probed = iterations(hard, 0, probe);
+  const int hard_half = iterations(hard, 0, 1e30);
+  EXPECT_LE(soft_single, 2);
+  EXPECT_GT(soft_half, soft_single);
+  EXPECT_EQ(hard_probed, hard_single);
+  EXPECT_GE(hard_half, 2 * hard_single);
+}
+
 // The background refresh (factor_lag_solves > 0): the factor is computed on a second thread and put in place a
 // fixed number of solves later. Every solve stays accurate (drift_run), the refreshes come from the background (no
 // solve factorises inline after the first), the work stays far below never refreshing, and two runs give

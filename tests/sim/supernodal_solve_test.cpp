@@ -10,6 +10,8 @@
 #include <cstdint>
 #include <limits>
 #include <random>
+#include <string>
+#include <tuple>
 
 #include "octocut/sim/linear_solver.hpp"
 #include "octocut/sim/parallel.hpp"
@@ -109,27 +111,51 @@ TEST(SupernodalSolve, PartsAreTheIndependentSubtreesAndTheTopTheirSeparator) {
 }
 
 // Small supernodes (the chains' single columns) and, in the second matrix, a large one (120 x 120, whose upper
-// triangle holds NaN): each solve against a dense solve of the matrix, and bit for bit on one thread and two.
-class SupernodalSolves : public ::testing::TestWithParam<bool> {};
+// triangle holds NaN), with the factor in single and in half precision: the values kept against the factor's (single
+// precision: rounded to float; half: 11 significant bits, or zero below 2^-28 of the column's largest entry), each
+// solve against a dense double-precision solve with the values kept, and bit for bit on one thread and two.
+class SupernodalSolves : public ::testing::TestWithParam<std::tuple<bool, bool>> {};
 
 TEST_P(SupernodalSolves, MatchADenseSolveOnOneThreadAndTwo) {
-  const Arrow a = GetParam() ? arrow_with_dense_separator(300, 120) : arrow(300, 12);
+  const auto [dense_separator, half] = GetParam();
+  const Arrow a = dense_separator ? arrow_with_dense_separator(300, 120) : arrow(300, 12);
   const SupernodalStructure L = structure(a);
   SupernodalSolvePlan plan;
   plan.build(L);
+  PackedFactor packed;
+  plan.pack(L, a.values.data(), half, packed);
+  ASSERT_EQ(packed.half(), half);
+  const std::vector<double> kept = plan.unpack(L, packed);
+  Eigen::MatrixXd Lk = Eigen::MatrixXd::Zero(a.n, a.n);  // the values kept, as a dense lower triangle
+  for (int s = 0; s < L.nsuper; ++s)
+    for (int j = L.super[s]; j < L.super[s + 1]; ++j) {
+      const int c = j - L.super[s], nsrow = L.pi[s + 1] - L.pi[s];
+      double largest = 0.0;
+      const double* column = a.values.data() + L.px[s] + c * nsrow;
+      for (int r = c + 1; r < nsrow; ++r) largest = std::max(largest, std::abs(column[r]));
+      for (int r = c; r < nsrow; ++r) {
+        const double x = column[r];
+        const double k = kept[std::size_t(L.px[s] + c * nsrow + r)];
+        Lk(L.rows[L.pi[s] + r], j) = k;
+        if (r == c || !half)  // the diagonal: 1 / float(1 / x); single precision: float(x)
+          EXPECT_NEAR(k, x, 1.2e-7 * std::abs(x)) << "entry " << r << " of column " << j;
+        else if (std::abs(x) >= 0x1p-28 * largest)
+          EXPECT_NEAR(k, x, 0x1p-11 * std::abs(x)) << "entry " << r << " of column " << j;
+        else
+          EXPECT_LE(std::abs(k), 0x1p-28 * largest) << "entry " << r << " of column " << j;
+      }
+    }
   const Eigen::VectorXd b = Eigen::VectorXd::LinSpaced(a.n, -1.0, 2.0);
-  const Eigen::VectorXd exact = a.A.llt().solve(b);
-  std::vector<float> values;
-  plan.pack(L, a.values.data(), values);
+  const Eigen::VectorXd exact = (Lk * Lk.transpose()).llt().solve(b);
   Executor one(1), two(2);
   std::vector<std::vector<float>> results;
   for (Executor* ex : {static_cast<Executor*>(nullptr), &one, &two}) {
     std::vector<float> y(b.data(), b.data() + b.size());
-    plan.forward(L, values.data(), y.data(), ex);
-    plan.backward(L, values.data(), y.data(), ex);
+    plan.forward(L, packed, y.data(), ex);
+    plan.backward(L, packed, y.data(), ex);
     double err = 0.0;
     for (int i = 0; i < a.n; ++i) err = std::max(err, std::abs(double(y[std::size_t(i)]) - exact[i]));
-    EXPECT_LT(err, 1e-5 * exact.cwiseAbs().maxCoeff());  // single precision
+    EXPECT_LT(err, 1e-5 * exact.cwiseAbs().maxCoeff());  // single-precision arithmetic
     results.push_back(y);
   }
   for (std::size_t r = 1; r < results.size(); ++r)
@@ -137,38 +163,66 @@ TEST_P(SupernodalSolves, MatchADenseSolveOnOneThreadAndTwo) {
       ASSERT_TRUE(results[r][std::size_t(i)] == results[0][std::size_t(i)]) << "run " << r << ", row " << i;
 }
 
-INSTANTIATE_TEST_SUITE_P(SupernodalSolve, SupernodalSolves, ::testing::Bool(),
-                         [](const ::testing::TestParamInfo<bool>& info) {
-                           return info.param ? "WithADenseSeparator" : "SingleColumns";
+INSTANTIATE_TEST_SUITE_P(SupernodalSolve, SupernodalSolves, ::testing::Combine(::testing::Bool(), ::testing::Bool()),
+                         [](const ::testing::TestParamInfo<std::tuple<bool, bool>>& info) {
+                           return std::string(std::get<0>(info.param) ? "WithADenseSeparator" : "SingleColumns") +
+                                  (std::get<1>(info.param) ? "InHalfPrecision" : "InSinglePrecision");
                          });
 
-// The kernels' arithmetic, written out one float at a time in the order supernode_kernels.hpp defines (blocks of 8
-// columns; a dot product's 16 partial sums over rows j1 + l, j1 + 16 + l, ..., added by a tree of halves): the
-// kernels, in whichever clone this CPU runs (AVX-512, AVX2 or SSE2), must give the same bits. Supernodes of 1 to 50
-// columns and up to 201 rows, random entries, NaN in the upper triangles (never read).
-namespace kernel_order {
-constexpr int kBlock = 8, kLanes = 16;
-float at(const std::vector<float>& L, int ld, int i, int j) {
-  return L[std::size_t(j) * std::size_t(ld) + std::size_t(i)];
+// half_code rounds to the nearest half-precision number, ties to even, as the compiler's own conversion does, over
+// the normal range and at its edges; half_value gives that number exactly.
+TEST(SupernodalSolve, HalfCodesAreTheNearestHalfPrecisionNumbers) {
+#if defined(__FLT16_MAX__)
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> exponent(-14.0, 15.99), mantissa(1.0, 2.0);
+  std::vector<double> values{0x1p-14, 65504.0, 1.0, 1.0 + 0x1p-11, 1.0 + 3 * 0x1p-11, 2047.5, 2048.5, 0.1, -0.1};
+  for (int i = 0; i < 20000; ++i) values.push_back((i % 2 ? -1.0 : 1.0) * std::exp2(exponent(rng)));
+  for (const double v : values) {
+    const auto expected = std::bit_cast<std::uint16_t>(static_cast<_Float16>(v));
+    ASSERT_EQ(half_code(v), expected) << v;
+    ASSERT_EQ(double(half_value(expected)), double(static_cast<_Float16>(v))) << v;
+  }
+#else
+  GTEST_SKIP() << "no _Float16 in this compiler to compare with";
+#endif
+  EXPECT_EQ(half_code(0x1p-15), 0);  // below the normal range: zero (pack scales columns to keep entries above it)
+  EXPECT_EQ(half_code(0.0), 0);
 }
 
-void forward(const std::vector<float>& L, int nscol, int nsrow, int ld, std::vector<float>& w) {
+// The kernels' arithmetic, written out one float at a time in the order supernode_kernels.hpp defines (blocks of 8
+// columns; a dot product's 16 partial sums over rows j1 + l, j1 + 16 + l, ..., added by a tree of halves; each column's
+// scale applied to x in the forward solve and to the dot product in the backward one): the kernels, in whichever copy
+// this CPU runs (AVX-512, AVX2 or SSE2), for floats and for half-precision codes, must give the same bits. Supernodes
+// of 1 to 50 columns and up to 201 rows, random entries and scales, NaN in the upper triangles (never read); every
+// copy this CPU can run (supernode_kernel_copies), the one the solves use first.
+namespace kernel_order {
+constexpr int kBlock = 8, kLanes = 16;
+struct Block {
+  std::vector<float> L;                // the entries' values (column-major, leading dimension ld)
+  std::vector<float> diag_inv, scale;  // per column
+  int ld = 0;
+  [[nodiscard]] float at(int i, int j) const { return L[std::size_t(j) * std::size_t(ld) + std::size_t(i)]; }
+};
+
+void forward(const Block& B, int nscol, int nsrow, std::vector<float>& w) {
   for (int j0 = 0; j0 < nscol; j0 += kBlock) {
     const int nc = std::min(kBlock, nscol - j0), j1 = j0 + nc;
     for (int j = j0; j < j1; ++j) {
-      w[std::size_t(j)] = w[std::size_t(j)] * at(L, ld, j, j);
-      for (int i = j + 1; i < j1; ++i) w[std::size_t(i)] = w[std::size_t(i)] - at(L, ld, i, j) * w[std::size_t(j)];
+      w[std::size_t(j)] = w[std::size_t(j)] * B.diag_inv[std::size_t(j)];
+      const float x = w[std::size_t(j)] * B.scale[std::size_t(j)];
+      for (int i = j + 1; i < j1; ++i) w[std::size_t(i)] = w[std::size_t(i)] - B.at(i, j) * x;
     }
+    float x[kBlock];
+    for (int q = 0; q < kBlock; ++q) x[q] = q < nc ? w[std::size_t(j0 + q)] * B.scale[std::size_t(j0 + q)] : 0.0f;
     for (int i = j1; i < nsrow; ++i) {
       float v = w[std::size_t(i)];
-      for (int q = 0; q < kBlock; ++q)
-        v = v - (q < nc ? at(L, ld, i, j0 + q) : at(L, ld, i, j0)) * (q < nc ? w[std::size_t(j0 + q)] : 0.0f);
+      for (int q = 0; q < kBlock; ++q) v = v - (q < nc ? B.at(i, j0 + q) : B.at(i, j0)) * x[q];
       w[std::size_t(i)] = v;
     }
   }
 }
 
-void backward(const std::vector<float>& L, int nscol, int nsrow, int ld, std::vector<float>& w) {
+void backward(const Block& B, int nscol, int nsrow, std::vector<float>& w) {
   for (int j1 = nscol, nc = nscol % kBlock ? nscol % kBlock : kBlock; j1 > 0; j1 -= nc, nc = kBlock) {
     const int j0 = j1 - nc;
     float s[kBlock];
@@ -176,49 +230,84 @@ void backward(const std::vector<float>& L, int nscol, int nsrow, int ld, std::ve
       float lane[kLanes] = {};
       for (int i = j1; i < nsrow; i += kLanes)
         for (int l = 0; l < kLanes; ++l)
-          lane[l] = lane[l] + (i + l < nsrow ? at(L, ld, i + l, j0 + q) * w[std::size_t(i + l)] : 0.0f);
+          lane[l] = lane[l] + (i + l < nsrow ? B.at(i + l, j0 + q) * w[std::size_t(i + l)] : 0.0f);
       for (int h = kLanes / 2; h >= 1; h /= 2)
         for (int l = 0; l < h; ++l) lane[l] = lane[l] + lane[l + h];
-      s[q] = lane[0];
+      s[q] = lane[0] * B.scale[std::size_t(j0 + q)];
     }
     for (int q = nc - 1; q >= 0; --q) {
       const int j = j0 + q;
       float v = w[std::size_t(j)] - s[q];
-      for (int r = j + 1; r < j1; ++r) v = v - at(L, ld, r, j) * w[std::size_t(r)];
-      w[std::size_t(j)] = v * at(L, ld, j, j);
+      for (int r = j + 1; r < j1; ++r) v = v - (B.at(r, j) * B.scale[std::size_t(j)]) * w[std::size_t(r)];
+      w[std::size_t(j)] = v * B.diag_inv[std::size_t(j)];
     }
   }
 }
 }  // namespace kernel_order
 
+// One supernode of nscol x nsrow, random entries (floats in [-1, 1), or codes of [-2^14, 2^14) with scales of 2^-16 to
+// 2^-14) and NaN in the upper triangle: `copy`'s forward and backward solves against kernel_order's, bit for bit.
+void check_kernels(const SupernodeKernelCopy& copy, bool half, int nscol, int nsrow, std::mt19937& rng) {
+  std::uniform_real_distribution<float> entry(-1.0f, 1.0f), diagonal(0.5f, 2.0f);
+  std::uniform_int_distribution<int> exponent(-16, -14);
+  kernel_order::Block B;
+  B.ld = (nsrow + kSupernodePadding + 15) / 16 * 16;
+  B.L.assign(std::size_t(nscol) * std::size_t(B.ld), 0.0f);
+  std::vector<float> floats = B.L;
+  std::vector<std::uint16_t> codes(B.L.size(), 0);
+  for (int j = 0; j < nscol; ++j) {
+    B.diag_inv.push_back(diagonal(rng));
+    B.scale.push_back(half ? std::ldexp(1.0f, exponent(rng)) : 1.0f);
+    for (int i = 0; i < nsrow; ++i) {
+      const std::size_t k = std::size_t(j) * std::size_t(B.ld) + std::size_t(i);
+      if (i <= j) {  // never read: NaN (codes: 0x7e00, a half-precision NaN)
+        floats[k] = B.L[k] = std::numeric_limits<float>::quiet_NaN();
+        codes[k] = 0x7e00;
+        continue;
+      }
+      codes[k] = half_code(double(entry(rng)) * 16384.0);
+      floats[k] = entry(rng);
+      B.L[k] = half ? half_value(codes[k]) : floats[k];
+    }
+  }
+  const std::string what = std::string(copy.name) + (half ? " half, " : " single, ") + std::to_string(nscol) + " x " +
+                           std::to_string(nsrow);
+  std::vector<float> w(std::size_t(B.ld), 0.0f);
+  for (int i = 0; i < nscol; ++i) w[std::size_t(i)] = entry(rng);
+  std::vector<float> expected = w;
+  if (half)
+    copy.forward_half(codes.data(), B.diag_inv.data(), B.scale.data(), nscol, nsrow, B.ld, w.data());
+  else
+    copy.forward(floats.data(), B.diag_inv.data(), B.scale.data(), nscol, nsrow, B.ld, w.data());
+  kernel_order::forward(B, nscol, nsrow, expected);
+  for (int i = 0; i < B.ld; ++i)
+    ASSERT_EQ(std::bit_cast<std::uint32_t>(w[std::size_t(i)]), std::bit_cast<std::uint32_t>(expected[std::size_t(i)]))
+        << "forward, " << what << ", row " << i;
+  std::fill(w.begin(), w.end(), 0.0f);
+  for (int i = 0; i < nsrow; ++i) w[std::size_t(i)] = entry(rng);
+  expected = w;
+  if (half)
+    copy.backward_half(codes.data(), B.diag_inv.data(), B.scale.data(), nscol, nsrow, B.ld, w.data());
+  else
+    copy.backward(floats.data(), B.diag_inv.data(), B.scale.data(), nscol, nsrow, B.ld, w.data());
+  kernel_order::backward(B, nscol, nsrow, expected);
+  for (int i = 0; i < B.ld; ++i)
+    ASSERT_EQ(std::bit_cast<std::uint32_t>(w[std::size_t(i)]), std::bit_cast<std::uint32_t>(expected[std::size_t(i)]))
+        << "backward, " << what << ", row " << i;
+}
+
 TEST(SupernodalSolve, KernelsGiveTheBitsOfTheirDefinedOrderOnThisCpu) {
   std::mt19937 rng(7);
-  std::uniform_real_distribution<float> entry(-1.0f, 1.0f), diagonal(0.5f, 2.0f);
   const std::array<std::pair<int, int>, 11> shapes{{{1, 1}, {1, 17}, {3, 3}, {3, 20}, {5, 40}, {8, 8}, {9, 31},
                                                     {13, 70}, {24, 100}, {50, 50}, {37, 201}}};
-  for (const auto& [nscol, nsrow] : shapes) {
-    const int ld = (nsrow + kSupernodePadding + 15) / 16 * 16;
-    std::vector<float> L(std::size_t(nscol) * std::size_t(ld), 0.0f);
-    for (int j = 0; j < nscol; ++j)
-      for (int i = 0; i < nsrow; ++i)
-        L[std::size_t(j) * std::size_t(ld) + std::size_t(i)] =
-            i < j ? std::numeric_limits<float>::quiet_NaN() : (i == j ? diagonal(rng) : entry(rng));
-    std::vector<float> w(std::size_t(ld), 0.0f), b(std::size_t(ld), 0.0f);
-    for (int i = 0; i < nscol; ++i) w[std::size_t(i)] = entry(rng);
-    std::vector<float> expected = w;
-    supernode_forward(L.data(), nscol, nsrow, ld, w.data());
-    kernel_order::forward(L, nscol, nsrow, ld, expected);
-    for (int i = 0; i < ld; ++i)
-      ASSERT_EQ(std::bit_cast<std::uint32_t>(w[std::size_t(i)]), std::bit_cast<std::uint32_t>(expected[std::size_t(i)]))
-          << "forward, " << nscol << " x " << nsrow << ", row " << i;
-    for (int i = 0; i < nsrow; ++i) b[std::size_t(i)] = entry(rng);
-    expected = b;
-    supernode_backward(L.data(), nscol, nsrow, ld, b.data());
-    kernel_order::backward(L, nscol, nsrow, ld, expected);
-    for (int i = 0; i < ld; ++i)
-      ASSERT_EQ(std::bit_cast<std::uint32_t>(b[std::size_t(i)]), std::bit_cast<std::uint32_t>(expected[std::size_t(i)]))
-          << "backward, " << nscol << " x " << nsrow << ", row " << i;
-  }
+  const std::vector<SupernodeKernelCopy> copies = supernode_kernel_copies();
+  ASSERT_FALSE(copies.empty());
+  for (const SupernodeKernelCopy& copy : copies)
+    for (const bool half : {false, true})
+      for (const auto& [nscol, nsrow] : shapes) {
+        check_kernels(copy, half, nscol, nsrow, rng);
+        if (HasFatalFailure()) return;
+      }
 }
 
 // Through PCG with the lagged single-precision factor on a 3D Laplacian of 8,000 unknowns (its factor's tree splits):

@@ -1,6 +1,7 @@
 #pragma once
 // Linear solvers behind one interface (SPEC §3): analyze_pattern once per sparsity pattern, factorize per matrix,
 // solve per right-hand side.
+#include <cstddef>
 #include <memory>
 #include <string>
 #include <vector>
@@ -94,9 +95,19 @@ struct LinearSolverOptions {
   /// factorisation (49 ms, two threads) took as long as 58 iterations (0.85 ms each), so 44 / 58.
   double factor_flop_advantage = 0.75;
   /// pcg with the lagged Cholesky preconditioner: solve with a single-precision copy of the factor (in single
-  /// precision: the triangular solves are bound by the memory traffic of L, which this halves). The preconditioner
+  /// precision: the triangular solves read L once per iteration, and this halves its bytes). The preconditioner
   /// is then the factor's value rounded to single precision, which converges in the same number of iterations.
   bool single_precision_factor = true;
+  /// pcg with that copy: a factor with more entries than this (in the solves' padded layout) is copied in half
+  /// precision instead, each column scaled by a power of two (11 significant bits; sim/src/supernode_kernels.hpp),
+  /// which halves the bytes each triangular solve streams once the factor no longer fits the caches: at the
+  /// meniscus's base level 6 (13.6 million entries) a preconditioner application takes 0.97 instead of 1.37 ms, and
+  /// the 30k-element cube of `octocut bench scaling` steps in 41 instead of 49 ms (docs/RESULTS.md). Below the
+  /// threshold the factor fits the caches and half precision saves nothing. The copy is kept in half precision only
+  /// when it solves its own matrix to within `half_precision_probe` (relative error on a fixed vector); otherwise, as
+  /// for stiff nearly incompressible tissue whose factor needs more digits, in single precision.
+  std::size_t half_precision_entries = std::size_t(1) << 21;
+  double half_precision_probe = 0.01;
   /// pcg with the lagged Cholesky preconditioner: a refresh of the factor runs on a second thread and is swapped in
   /// this many solves after it started (the solve then waits for it if need be); 0 refreshes at once, stalling that
   /// solve. The first factor of a pattern, and the refresh after a solve that fails to converge, are always at once.

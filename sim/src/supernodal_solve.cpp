@@ -29,6 +29,21 @@ double deal(const std::vector<int>& pieces, const std::vector<double>& sub, std:
   return std::max(load[0], load[1]);
 }
 
+// A supernode's forward (or backward) kernel on L's values in the precision `packed` holds: its block starts at
+// `offset` in the packed layout, its columns at k1.
+void supernode_kernel(bool forward, const PackedFactor& packed, long offset, int k1, int nscol, int nsrow, int ld,
+                      float* w) {
+  const float* d = packed.diag_inv.data() + k1;
+  const float* s = packed.scale.data() + k1;
+  if (packed.half()) {
+    const std::uint16_t* L = packed.codes.data() + offset;
+    forward ? supernode_forward(L, d, s, nscol, nsrow, ld, w) : supernode_backward(L, d, s, nscol, nsrow, ld, w);
+  } else {
+    const float* L = packed.values.data() + offset;
+    forward ? supernode_forward(L, d, s, nscol, nsrow, ld, w) : supernode_backward(L, d, s, nscol, nsrow, ld, w);
+  }
+}
+
 }  // namespace
 
 void SupernodalSolvePlan::build(const SupernodalStructure& L) {
@@ -139,7 +154,8 @@ void SupernodalSolvePlan::pack(const SupernodalStructure& L, const double* x, bo
       // single precision's range.
       const int k = largest > 0.0 ? std::clamp(std::ilogb(largest) - 14, -126, 127) : 0;
       packed.scale[col] = std::ldexp(1.0f, k);
-      for (int i = j + 1; i < nsrow; ++i) packed.codes[std::size_t(at + i)] = half_code(std::ldexp(from[i], -k));
+      const double unscale = std::ldexp(1.0, -k);  // exact products: a power of two, nothing overflows
+      for (int i = j + 1; i < nsrow; ++i) packed.codes[std::size_t(at + i)] = half_code(from[i] * unscale);
     }
   }
 }
@@ -172,12 +188,7 @@ void SupernodalSolvePlan::forward_range(const SupernodalStructure& L, const Pack
     w.resize(std::size_t(ld));
     std::copy(y + k1, y + k1 + nscol, w.begin());
     std::fill(w.begin() + nscol, w.end(), 0.0f);
-    if (packed.half())
-      supernode_forward(packed.codes.data() + m_px[std::size_t(sn)], packed.diag_inv.data() + k1,
-                        packed.scale.data() + k1, nscol, nsrow, ld, w.data());
-    else
-      supernode_forward(packed.values.data() + m_px[std::size_t(sn)], packed.diag_inv.data() + k1,
-                        packed.scale.data() + k1, nscol, nsrow, ld, w.data());
+    supernode_kernel(true, packed, m_px[std::size_t(sn)], k1, nscol, nsrow, ld, w.data());
     std::copy(w.begin(), w.begin() + nscol, y + k1);
     const int nb = nsrow - nscol;  // the rows below hold -B y_diag, added to the rows they stand for
     const int* r = L.rows + L.pi[sn] + nscol;
@@ -206,12 +217,7 @@ void SupernodalSolvePlan::backward_range(const SupernodalStructure& L, const Pac
     const int* r = L.rows + L.pi[sn] + nscol;
     for (int i = nscol; i < nsrow; ++i) w[std::size_t(i)] = y[r[i - nscol]];
     std::fill(w.begin() + nsrow, w.end(), 0.0f);
-    if (packed.half())
-      supernode_backward(packed.codes.data() + m_px[std::size_t(sn)], packed.diag_inv.data() + k1,
-                         packed.scale.data() + k1, nscol, nsrow, ld, w.data());
-    else
-      supernode_backward(packed.values.data() + m_px[std::size_t(sn)], packed.diag_inv.data() + k1,
-                         packed.scale.data() + k1, nscol, nsrow, ld, w.data());
+    supernode_kernel(false, packed, m_px[std::size_t(sn)], k1, nscol, nsrow, ld, w.data());
     std::copy(w.begin(), w.begin() + nscol, y + k1);
   }
 }

@@ -1,10 +1,12 @@
 #pragma once
-// Triangular solves with a supernodal Cholesky factor L (CHOLMOD's structure; values stored in half precision with a
-// power-of-two scale per column, arithmetic in single precision) on two threads.
-// Private to sim/src: the preconditioner's solves, which PCG applies once per iteration, are bound by the latency of
-// many small dense kernels, not by memory bandwidth (one core streams 20 GB/s here, the solves reached 9 with Eigen's
-// and OpenBLAS's kernels), so they gain from a second core and from our own kernels (supernode_kernels.hpp: whole
-// 16-float vectors over columns padded with zeros, no call per supernode into a library). The supernodal elimination
+// Triangular solves with a supernodal Cholesky factor L (CHOLMOD's structure; values stored in single precision, or
+// in half precision with a power-of-two scale per column; arithmetic in single precision) on two threads.
+// Private to sim/src: the preconditioner's solves, which PCG applies once per iteration. With a factor that fits the
+// caches they are bound by the latency of many small dense kernels, not by memory bandwidth (one core streams
+// 20 GB/s here, the solves reached 9 with Eigen's and OpenBLAS's kernels), so they gain from a second core and from
+// our own kernels (supernode_kernels.hpp: whole 16-float vectors over columns padded with zeros, no call per
+// supernode into a library); a factor too large for the caches streams from memory, and half precision halves its
+// bytes. The supernodal elimination
 // tree is cut into disjoint subtrees, dealt to two parts of about equal work, and the supernodes above them (the
 // "top") are solved by one thread: in the forward solve after the parts, in the backward solve before them.
 #include <array>

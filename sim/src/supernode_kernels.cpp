@@ -6,7 +6,6 @@
 // ones) lane by lane, and every sum is in an order fixed by this code (the dot products' 16 partial sums and the tree
 // that adds them); half precision's codes are widened to floats exactly. So every copy gives the same bits.
 
-#include <cmath>
 #include <cstddef>
 #include <cstring>
 #include <vector>
@@ -122,18 +121,6 @@ const SupernodeKernelCopy& kernels() {
 }  // namespace
 
 std::vector<SupernodeKernelCopy> supernode_kernel_copies() { return copies_here(); }
-
-std::uint16_t half_code(double v) {
-  const double a = std::abs(v);
-  if (!(a >= 0x1p-14)) return 0;  // below the smallest normal half (and NaN, which pack never gives)
-  int e = std::ilogb(a);          // a in [2^e, 2^(e + 1))
-  const double q = std::ldexp(1.0, e - 10);
-  const double r = std::nearbyint(a / q) * q;  // 11 significant bits, ties to even
-  e = std::ilogb(r);                           // rounding may carry into the next binade
-  const auto fraction = std::uint32_t(std::ldexp(r, -e) * 1024.0 - 1024.0);
-  const std::uint32_t code = (std::uint32_t(e + 15) << 10) | fraction | (v < 0.0 ? 0x8000u : 0u);
-  return std::uint16_t(code);
-}
 
 void supernode_forward(const float* L, const float* diag_inv, const float* scale, int nscol, int nsrow, int ld,
                        float* w) {

@@ -272,28 +272,22 @@ void check_kernels(const SupernodeKernelCopy& copy, bool half, int nscol, int ns
   }
   const std::string what = std::string(copy.name) + (half ? " half, " : " single, ") + std::to_string(nscol) + " x " +
                            std::to_string(nsrow);
-  std::vector<float> w(std::size_t(B.ld), 0.0f);
-  for (int i = 0; i < nscol; ++i) w[std::size_t(i)] = entry(rng);
-  std::vector<float> expected = w;
-  if (half)
-    copy.forward_half(codes.data(), B.diag_inv.data(), B.scale.data(), nscol, nsrow, B.ld, w.data());
-  else
-    copy.forward(floats.data(), B.diag_inv.data(), B.scale.data(), nscol, nsrow, B.ld, w.data());
-  kernel_order::forward(B, nscol, nsrow, expected);
-  for (int i = 0; i < B.ld; ++i)
-    ASSERT_EQ(std::bit_cast<std::uint32_t>(w[std::size_t(i)]), std::bit_cast<std::uint32_t>(expected[std::size_t(i)]))
-        << "forward, " << what << ", row " << i;
-  std::fill(w.begin(), w.end(), 0.0f);
-  for (int i = 0; i < nsrow; ++i) w[std::size_t(i)] = entry(rng);
-  expected = w;
-  if (half)
-    copy.backward_half(codes.data(), B.diag_inv.data(), B.scale.data(), nscol, nsrow, B.ld, w.data());
-  else
-    copy.backward(floats.data(), B.diag_inv.data(), B.scale.data(), nscol, nsrow, B.ld, w.data());
-  kernel_order::backward(B, nscol, nsrow, expected);
-  for (int i = 0; i < B.ld; ++i)
-    ASSERT_EQ(std::bit_cast<std::uint32_t>(w[std::size_t(i)]), std::bit_cast<std::uint32_t>(expected[std::size_t(i)]))
-        << "backward, " << what << ", row " << i;
+  for (const bool forward : {true, false}) {
+    // The forward solve reads w[0, nscol), the backward one w[0, nsrow); zeros after.
+    std::vector<float> w(std::size_t(B.ld), 0.0f);
+    for (int i = 0; i < (forward ? nscol : nsrow); ++i) w[std::size_t(i)] = entry(rng);
+    std::vector<float> expected = w;
+    const auto kernel = half ? (forward ? copy.forward_half : copy.backward_half) : nullptr;
+    const auto kernel_f = half ? nullptr : (forward ? copy.forward : copy.backward);
+    if (half)
+      kernel(codes.data(), B.diag_inv.data(), B.scale.data(), nscol, nsrow, B.ld, w.data());
+    else
+      kernel_f(floats.data(), B.diag_inv.data(), B.scale.data(), nscol, nsrow, B.ld, w.data());
+    (forward ? kernel_order::forward : kernel_order::backward)(B, nscol, nsrow, expected);
+    for (int i = 0; i < B.ld; ++i)
+      ASSERT_EQ(std::bit_cast<std::uint32_t>(w[std::size_t(i)]), std::bit_cast<std::uint32_t>(expected[std::size_t(i)]))
+          << (forward ? "forward, " : "backward, ") << what << ", row " << i;
+  }
 }
 
 TEST(SupernodalSolve, KernelsGiveTheBitsOfTheirDefinedOrderOnThisCpu) {

@@ -528,7 +528,11 @@ std::vector<BenchOutput> bench_scaling() {
     b.metrics = {{"elements", run.elements}, {"dofs", run.dofs},
                  {"ms_per_element_us", 1000.0 * b.ms.median / double(std::max(1L, run.elements))},
                  {"mean_pcg_iterations", double(run.iterations) / double(std::max<std::size_t>(1, run.step_ms.size()))},
-                 {"refactorizations", run.refactorizations}};
+                 {"refactorizations", run.refactorizations},
+                 {"rotations_ms", profile_median(run.profile, 5, &sim::StepProfile::rotations)},
+                 {"forces_ms", profile_median(run.profile, 5, &sim::StepProfile::forces)},
+                 {"assembly_ms", profile_median(run.profile, 5, &sim::StepProfile::assembly)},
+                 {"solve_ms", profile_median(run.profile, 5, &sim::StepProfile::solve)}};
     out.push_back(std::move(b));
   }
   return out;

@@ -798,6 +798,9 @@ class PcgSolver final : public LinearSolver {
   void set_executor(Executor* executor) override { m_executor = executor; }
   void set_fast_dofs(std::vector<int> dofs) override { m_fast_now = std::move(dofs); }
   void set_dof_rotations(std::vector<Mat3> rotations) override { m_rotations_now = std::move(rotations); }
+  void set_reference_norm(double reference) override {
+    m_reference = std::isfinite(reference) && reference > 0.0 ? reference : 0.0;
+  }
 
  private:
   // The first factorize() of a pattern after a cut, with an inherited factor: the bridge preconditions the solves
@@ -980,12 +983,13 @@ class PcgSolver final : public LinearSolver {
   }
   void run_pcg(const VecX& b, VecX& x, SolveInfo& info, int max_iterations) {
     SystemOperator& A = *m_A;
-    const double bn = b.norm();
-    if (!(bn > 0.0)) {
+    const double b_norm = b.norm();
+    if (!(b_norm > 0.0)) {
       x.setZero();
-      info.ok = std::isfinite(bn);
+      info.ok = std::isfinite(b_norm);
       return;
     }
+    const double bn = std::max(b_norm, m_reference);  // what the residual is measured against
     // The warm start x is first scaled by the a that minimises the error's A-norm along it, a = x^T b / x^T A x
     // (A x is needed for the residual anyway): a start that overshoots, as the extrapolated increments do when
     // contacts come and go, is then never worse than none (meniscus_punch's contact steps: 7.1 -> 6.3 iterations).
@@ -1044,6 +1048,7 @@ class PcgSolver final : public LinearSolver {
   SystemOperator* m_A = nullptr;   ///< the matrix of the solves (factorize_operator)
   MatrixOperator m_stored;         ///< the operator of a matrix given to factorize()
   Executor* m_executor = nullptr;  ///< runs the products with A (null: the calling thread)
+  double m_reference = 0.0;        ///< set_reference_norm (0: the residual is measured against |b| alone)
   std::vector<int> m_fast_now;     ///< the fast DOFs of the current matrix (set_fast_dofs)
   std::vector<int> m_fast_front;   ///< those of the matrix the front factor was computed from
   std::vector<Mat3> m_rotations_now;    ///< the DOFs' rotations at the current matrix (set_dof_rotations)

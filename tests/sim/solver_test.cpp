@@ -151,6 +151,39 @@ TEST(LinearSolver, PcgWithLaggedFactorConvergesFastOnANearbyMatrix) {
   EXPECT_LT((A1 * x - b).norm(), 1e-9 * b.norm());
 }
 
+// set_reference_norm: the residual is measured against max(|b|, reference). Checked against the residual of the
+// returned x computed here: with a reference 100x |b| the solve stops as soon as |b - A x| <= tol * reference, in
+// fewer iterations; with a reference below |b| (or 0, or NaN) the iterates are those of a solve without one.
+TEST(LinearSolver, PcgMeasuresTheResidualAgainstTheReferenceWhereItIsLarger) {
+  const SpMat A = laplacian(8, 0.1);
+  const VecX b = VecX::LinSpaced(A.rows(), -1.0, 2.0);
+  LinearSolverOptions o;
+  o.tolerance = 1e-6;
+  o.preconditioner = "jacobi";  // many iterations, each reducing the residual a little
+  const auto solve = [&](double reference, VecX& x) {
+    auto s = make_linear_solver("pcg", o);
+    s->analyze_pattern(A);
+    EXPECT_TRUE(s->factorize(A));
+    s->set_reference_norm(reference);
+    x = VecX::Zero(A.rows());
+    return s->solve(b, x);
+  };
+  VecX x0, x_ref, x_small, x_nan;
+  const SolveInfo plain = solve(0.0, x0);
+  const double reference = 100.0 * b.norm();
+  const SolveInfo loose = solve(reference, x_ref);
+  ASSERT_TRUE(plain.ok && loose.ok);
+  EXPECT_LE((b - A * x0).norm(), o.tolerance * b.norm());
+  EXPECT_LE((b - A * x_ref).norm(), o.tolerance * reference);
+  EXPECT_GT((b - A * x_ref).norm(), o.tolerance * b.norm());  // it did stop earlier than the plain criterion
+  EXPECT_NEAR(loose.residual, (b - A * x_ref).norm() / reference, 1e-3 * loose.residual);
+  EXPECT_LT(loose.iterations, plain.iterations);
+  EXPECT_EQ(solve(0.5 * b.norm(), x_small).iterations, plain.iterations);
+  EXPECT_EQ(x_small, x0);
+  EXPECT_EQ(solve(std::nan(""), x_nan).iterations, plain.iterations);
+  EXPECT_EQ(x_nan, x0);
+}
+
 // The rent-or-buy rule: a matrix that stays where it is after one step of change (the baseline) never buys a new
 // factor, however many solves follow.
 TEST(LinearSolver, PcgKeepsTheLaggedFactorWhileIterationsStayAtTheBaseline) {

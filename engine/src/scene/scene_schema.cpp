@@ -236,7 +236,10 @@ Entry make_scene_schema() {
                  "Linear solver: `cholmod` (supernodal Cholesky, factorised every step) or `pcg` (warm-started "
                  "conjugate gradients preconditioned by a lagged Cholesky factor that is refreshed when convergence "
                  "slows)."),
-          number("tolerance", 1e-6, open(0, 1), "Relative residual at which iterative solves stop (dimensionless)."),
+          number("tolerance", 1e-6, open(0, 1),
+                 "Relative residual at which iterative solves stop (dimensionless): a dynamic step's pcg stops once "
+                 "the residual is below it times the larger of the right-hand side and the elastic forces the step "
+                 "balances."),
           integer("max_iterations", 200, closed(1, 100000),
                   "Iteration limit per linear solve (pcg) or per static solve (Newton)."),
           integer("factor_lag", 0, closed(0, 64),

@@ -83,10 +83,16 @@ class LinearSolver {
   /// matrix Q A_factor Q^T is close to A (docs/architecture.md, "Linear solvers"); the others ignore it. Call before
   /// factorize(); empty (the default) turns it off.
   virtual void set_dof_rotations(std::vector<Mat3> rotations) {}
+  /// The norm a solve's residual is measured against where it exceeds |b|: pcg stops once
+  /// |b - A x| <= tolerance * max(|b|, reference) and reports that ratio as SolveInfo::residual; the others ignore
+  /// it. The simulator passes the norm of the elastic forces its step balances (Simulator::solve_increment), so that
+  /// a step near equilibrium, whose out-of-balance right-hand side is orders of magnitude below those forces, is not
+  /// resolved to the tolerance of that small remainder. 0 (the default): |b| alone. Holds for the solves that follow.
+  virtual void set_reference_norm(double reference) {}
 };
 
 struct LinearSolverOptions {
-  double tolerance = 1e-6;     ///< pcg: relative residual target
+  double tolerance = 1e-6;     ///< pcg: relative residual target (relative to |b|, or to LinearSolver::set_reference_norm)
   int max_iterations = 200;    ///< pcg: iteration cap
   /// pcg with the lagged Cholesky preconditioner: how many more floating-point operations per second the supernodal
   /// factorisation does than the triangular solves of a PCG iteration. The factor is refreshed once the iterations

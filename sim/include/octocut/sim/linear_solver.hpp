@@ -92,7 +92,7 @@ class LinearSolver {
 };
 
 struct LinearSolverOptions {
-  double tolerance = 1e-6;     ///< pcg: relative residual target (relative to |b|, or to LinearSolver::set_reference_norm)
+  double tolerance = 1e-6;     ///< pcg: relative residual target (of |b|, or set_reference_norm's norm)
   int max_iterations = 200;    ///< pcg: iteration cap
   /// pcg with the lagged Cholesky preconditioner: how many more floating-point operations per second the supernodal
   /// factorisation does than the triangular solves of a PCG iteration. The factor is refreshed once the iterations

@@ -1,4 +1,4 @@
-set xrange [1.01893:2052.41]
+set xrange [0.954798:2102.46]
 set yrange [0.0324767:1.44048]
 set terminal pngcairo size 1280,860 font 'sans,10'
 set output out

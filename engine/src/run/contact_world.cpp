@@ -6,6 +6,7 @@
 #include <btBulletDynamicsCommon.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <iterator>
 #include <limits>
@@ -58,6 +59,22 @@ sim::TriMesh load_collider(const Scene& scene, const std::string& path, double s
   }
 }
 
+// What a box query of a triangle mesh proved about the triangles near a sample: at the local point `anchor` (m), the
+// `count` triangles `candidates` (in the order the query visited them) were the nearest, and every other triangle lay
+// at least `margin` away (the nearest of those found, or the box's half-size for the ones it did not visit: a
+// triangle outside the cube lies farther than its half-size). Once the sample has moved by delta from the anchor,
+// every other triangle lies at least margin - delta away; while the nearest candidate is nearer than that, a box query
+// would find it, with its ties broken the same way (the candidates are visited in the query's order), and give the
+// same distance, normal and clearance (the same corners and arithmetic): the query can be left out without changing
+// any result. margin < 0: none.
+struct NearestCertificate {
+  static constexpr int kCandidates = 8;  // a vertex of the bones' meshes has 5-8 triangles around it
+  btVector3 anchor{0, 0, 0};             // m, in the mesh's frame
+  std::array<int, kCandidates> candidates{};
+  int count = 0;
+  double margin = -1.0;  // m
+};
+
 // One rigid shape in the Bullet world.
 struct Collider {
   ColliderState state;
@@ -79,18 +96,41 @@ struct Collider {
   std::vector<Vec3> cache_local;                  // per sample: local position at its last query, m
   std::vector<double> cache_clearance;            // per sample: distance known free of the surface there, m
   std::vector<double> last_depth;                 // per sample: its penetration at the last query, m (0: none)
+  std::vector<NearestCertificate> certificate;    // per sample (triangle meshes): its nearest triangles, see there
+
+  // Triangle `index`'s corners in the mesh's frame, as Bullet hands them to a query (its vertex times the mesh's
+  // scaling; btStridingMeshInterface's processing of a double-precision vertex array).
+  [[nodiscard]] std::array<btVector3, 3> corners(int index) const {
+    const btVector3& s = mesh_array->getScaling();
+    std::array<btVector3, 3> out;
+    for (int k = 0; k < 3; ++k) {
+      const btScalar* v = &vertices[3 * std::size_t(triangles[3 * std::size_t(index) + std::size_t(k)])];
+      out[std::size_t(k)] = btVector3(v[0] * s.getX(), v[1] * s.getY(), v[2] * s.getZ());
+    }
+    return out;
+  }
 };
 
 // The nearest triangle of a concave mesh to a local point, through Bullet's BVH and Bullet's closed-form closest point
 // on a triangle (btVoronoiSimplexSolver::closestPtPointTriangle, the Voronoi-region test GJK's simplex solver uses;
-// a full GJK per triangle cost 3-4 times as much and gave the same point).
+// a full GJK per triangle cost 3-4 times as much and gave the same point). Also keeps the certificate's candidates:
+// the kCandidates nearest triangles visited, and the distance of the nearest other one (`outside`).
 struct NearestTriangle : btTriangleCallback {
+  static constexpr int K = NearestCertificate::kCandidates;
   btVector3 point;
   double best = std::numeric_limits<double>::infinity();
   btVector3 closest{0, 0, 0};
   btVector3 face_normal{0, 0, 1};
   btVoronoiSimplexSolver simplex;
-  void processTriangle(btVector3* tri, int, int) override {
+  // The candidates, nearest first: distance, triangle index and visit number.
+  std::array<double, K> near_dist{};
+  std::array<int, K> near_index{};
+  std::array<int, K> near_visit{};
+  int kept = 0;
+  int visits = 0;
+  double outside = std::numeric_limits<double>::infinity();  // m
+
+  void processTriangle(btVector3* tri, int, int index) override {
     btSubSimplexClosestResult r;
     simplex.closestPtPointTriangle(point, tri[0], tri[1], tri[2], r);
     const double dist = double((point - r.m_closestPointOnSimplex).length());
@@ -99,13 +139,61 @@ struct NearestTriangle : btTriangleCallback {
       closest = dist > 0.0 ? r.m_closestPointOnSimplex : point;
       face_normal = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
     }
+    keep(dist, index, visits++);
+  }
+  void keep(double dist, int index, int visit) {
+    if (kept == K && !(dist < near_dist[K - 1])) {
+      outside = std::min(outside, dist);
+      return;
+    }
+    if (kept == K) outside = std::min(outside, near_dist[K - 1]);
+    int at = kept == K ? K - 1 : kept++;
+    for (; at > 0 && dist < near_dist[std::size_t(at) - 1]; --at) {
+      near_dist[std::size_t(at)] = near_dist[std::size_t(at) - 1];
+      near_index[std::size_t(at)] = near_index[std::size_t(at) - 1];
+      near_visit[std::size_t(at)] = near_visit[std::size_t(at) - 1];
+    }
+    near_dist[std::size_t(at)] = dist;
+    near_index[std::size_t(at)] = index;
+    near_visit[std::size_t(at)] = visit;
+  }
+  // The certificate of this query of a box of half-size `box` (m).
+  [[nodiscard]] NearestCertificate certificate(double box) const {
+    NearestCertificate out;
+    out.anchor = point;
+    out.count = kept;
+    std::array<int, K> visit{};  // the candidates in visit order (an insertion sort of at most K)
+    for (int k = 0; k < kept; ++k) {
+      int at = k;
+      for (; at > 0 && near_visit[std::size_t(k)] < visit[std::size_t(at) - 1]; --at) {
+        visit[std::size_t(at)] = visit[std::size_t(at) - 1];
+        out.candidates[std::size_t(at)] = out.candidates[std::size_t(at) - 1];
+      }
+      visit[std::size_t(at)] = near_visit[std::size_t(k)];
+      out.candidates[std::size_t(at)] = near_index[std::size_t(k)];
+    }
+    out.margin = std::min(outside, box);
+    return out;
   }
 };
+
+// The signed distance, normal (world, unit, out of the collider) and clearance of a box query's nearest triangle
+// (cb.best below the box's half-size); see signed_distance.
+double nearest_result(const NearestTriangle& cb, const btTransform& pose, Vec3& normal, double& clearance) {
+  const btVector3 away = cb.point - cb.closest;
+  const bool inside = away.dot(cb.face_normal) < 0;
+  clearance = inside ? 0.0 : cb.best;
+  btVector3 n = cb.best > 1e-12 ? (inside ? -away : away) : cb.face_normal;
+  n.normalize();
+  normal = from_bt(pose.getBasis() * n);
+  return inside ? -cb.best : cb.best;
+}
 
 // The signed distance of a world point to a collider at `pose`: < 0 inside. `normal` (world, unit) points out of
 // the collider. `clearance` gets a distance the point may move (in the collider's frame) and stay outside.
 double signed_distance(const Collider& c, const btTransform& pose, const Vec3& p, double depth, Vec3& normal,
-                       double& clearance) {
+                       double& clearance, NearestCertificate* certificate = nullptr) {
+  if (certificate) certificate->margin = -1.0;
   if (c.convex) {
     btGjkEpaSolver2::sResults r;
     const double d = btGjkEpaSolver2::SignedDistance(bt(p), 0, c.convex, pose, r);
@@ -125,13 +213,8 @@ double signed_distance(const Collider& c, const btTransform& pose, const Vec3& p
     clearance = depth;  // nothing within the cube of half-size depth: nothing within depth
     return depth;
   }
-  const btVector3 away = cb.point - cb.closest;
-  const bool inside = away.dot(cb.face_normal) < 0;
-  clearance = inside ? 0.0 : cb.best;
-  btVector3 n = cb.best > 1e-12 ? (inside ? -away : away) : cb.face_normal;
-  n.normalize();
-  normal = from_bt(pose.getBasis() * n);
-  return inside ? -cb.best : cb.best;
+  if (certificate) *certificate = cb.certificate(depth);
+  return nearest_result(cb, pose, normal, clearance);
 }
 
 // signed_distance for a sample whose penetration at its last query was `last` (m; 0: it was outside), searched
@@ -140,14 +223,33 @@ double signed_distance(const Collider& c, const btTransform& pose, const Vec3& p
 // same triangle and the same tie-break, since the box query visits a subset in the same order), and only when
 // nothing is that near within 2 `last`.
 double tracked_distance(const Collider& c, const btTransform& pose, const Vec3& p, double depth, double last,
-                        Vec3& normal, double& clearance) {
+                        Vec3& normal, double& clearance, NearestCertificate* certificate, bool& certified) {
+  certified = false;
   const double deep = std::max(depth, 2.0 * last);  // m
   const double near = std::max(depth, 1.25 * last);  // m
+  if (c.convex == nullptr && certificate && certificate->margin > 0.0) {
+    // The box queries below would find the certificate's nearest candidate (see NearestCertificate): it is nearer
+    // than any other triangle and than `deep`, so either the first query finds it (nearer than `near`) or the first
+    // finds nothing nearer than `near` and the second finds it.
+    NearestTriangle cb;
+    cb.point = pose.invXform(bt(p));
+    const double moved = double((cb.point - certificate->anchor).length());
+    for (int k = 0; k < certificate->count; ++k) {
+      std::array<btVector3, 3> corners = c.corners(certificate->candidates[std::size_t(k)]);
+      cb.processTriangle(corners.data(), 0, 0);
+    }
+    // The slack covers the rounding of the distances (about 1e-16 of the coordinates, here 1e-18 m).
+    constexpr double kSlack = 1e-12;  // m
+    if (cb.best + moved + kSlack < certificate->margin && cb.best < deep) {
+      certified = true;
+      return nearest_result(cb, pose, normal, clearance);
+    }
+  }
   if (c.convex == nullptr && near < deep) {
-    const double d = signed_distance(c, pose, p, near, normal, clearance);
+    const double d = signed_distance(c, pose, p, near, normal, clearance, certificate);
     if (d < near) return d;
   }
-  return signed_distance(c, pose, p, deep, normal, clearance);
+  return signed_distance(c, pose, p, deep, normal, clearance, certificate);
 }
 
 }  // namespace
@@ -330,6 +432,7 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
     c.cache_local.assign(std::size_t(n), Vec3::Zero());
     c.cache_clearance.assign(std::size_t(n), -1.0);
     c.last_depth.assign(std::size_t(n), 0.0);
+    c.certificate.assign(c.concave ? std::size_t(n) : 0, NearestCertificate{});
   }
   const btVector3 com = c.dynamic ? c.body->getCenterOfMassPosition() : btVector3(0, 0, 0);
   const bool parallel = executor != nullptr && executor->threads() > 1;
@@ -368,6 +471,7 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
     std::vector<sim::Contact> contacts;
     std::vector<ContactRef> refs;
     double max_penetration = 0.0;
+    long searched = 0, certified = 0;
   };
   std::vector<Found> found(static_cast<std::size_t>(chunks));
   const auto run = [&](int cb, int ce) {
@@ -379,7 +483,10 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
         const Vec3 local = pose.rotation.transpose() * (p - pose.position);
         Vec3 normal = Vec3::UnitZ();
         double& last = c.last_depth[std::size_t(i)];
-        const double d = tracked_distance(c, tr, p, depth, last, normal, c.cache_clearance[std::size_t(i)]);
+        bool certified = false;
+        const double d = tracked_distance(c, tr, p, depth, last, normal, c.cache_clearance[std::size_t(i)],
+                                          c.concave ? &c.certificate[std::size_t(i)] : nullptr, certified);
+        ++(certified ? f.certified : f.searched);
         c.cache_local[std::size_t(i)] = local;
         last = d < 0.0 ? -d : 0.0;
         if (!(d < 0.0)) continue;
@@ -404,6 +511,8 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
   else
     run(0, chunks);
   for (Found& f : found) {
+    profile.searched += f.searched;
+    profile.certified += f.certified;
     c.state.max_penetration = std::max(c.state.max_penetration, f.max_penetration);
     std::move(f.contacts.begin(), f.contacts.end(), std::back_inserter(out));
     refs.insert(refs.end(), f.refs.begin(), f.refs.end());
@@ -429,6 +538,7 @@ std::vector<sim::Contact> ContactWorld::find(const sim::ContactSamples& samples,
     place(0, n);
   std::vector<sim::Contact> out;
   m->refs.clear();
+  m->profile.searched = m->profile.certified = 0;
   for (std::size_t ci = 0; ci < m->colliders.size(); ++ci) {
     m->colliders[ci].state.max_penetration = 0.0;
     m->query(ci, samples, positions, t, dt, tool_now, tool_next, executor, out);
@@ -481,6 +591,7 @@ void ContactWorld::reset_samples() {
     c.cache_local.clear();
     c.cache_clearance.clear();
     c.last_depth.clear();
+    c.certificate.clear();
   }
 }
 

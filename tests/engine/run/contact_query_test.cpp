@@ -7,7 +7,9 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <limits>
+#include <numbers>
 #include <string>
 #include <vector>
 
@@ -147,6 +149,103 @@ TEST_F(ContactQuery, SamplesPressedDeepIntoAConcaveColliderGetTheirDistanceToIts
   }
   EXPECT_GT(checked, 5000);
   EXPECT_GT(deep, 1000);  // tracked far deeper than the search depth
+}
+
+// A UV sphere of radius `r` (cm) as an OBJ, outward oriented: `lat` rings of `lon` vertices between the poles.
+std::string uv_sphere_obj(double r, int lat, int lon) {
+  std::string s = "v 0 0 " + std::to_string(-r) + "\n";  // vertex 1: the south pole
+  for (int i = 1; i < lat + 1; ++i) {
+    const double th = std::numbers::pi * double(i) / double(lat + 1) - std::numbers::pi / 2;
+    for (int j = 0; j < lon; ++j) {
+      const double ph = 2.0 * std::numbers::pi * double(j) / double(lon);
+      const double x = r * std::cos(th) * std::cos(ph), y = r * std::cos(th) * std::sin(ph), z = r * std::sin(th);
+      s += "v " + std::to_string(x) + " " + std::to_string(y) + " " + std::to_string(z) + "\n";
+    }
+  }
+  s += "v 0 0 " + std::to_string(r) + "\n";  // the north pole
+  const auto v = [lon](int i, int j) { return 2 + (i - 1) * lon + (j % lon); };  // ring i in 1..lat
+  const int north = 2 + lat * lon;
+  const auto face = [](int a, int b, int c) {
+    return "f " + std::to_string(a) + " " + std::to_string(b) + " " + std::to_string(c) + "\n";
+  };
+  for (int j = 0; j < lon; ++j) {
+    s += face(1, v(1, j + 1), v(1, j));
+    s += face(north, v(lat, j), v(lat, j + 1));
+    for (int i = 1; i < lat; ++i)
+      s += face(v(i, j), v(i, j + 1), v(i + 1, j + 1)) + face(v(i, j), v(i + 1, j + 1), v(i + 1, j));
+  }
+  return s;
+}
+
+// A sample whose nearest triangle of a mesh collider its last box query certified (every other triangle farther than
+// the nearest candidate by more than the sample has moved since) is not queried again: its contact must be the one a
+// full query gives, bit for bit. Samples 0.05-0.45 mm inside and outside a 1 cm sphere of 0.65 mm triangles slide
+// along it, each step by 2 um (most get certified) or, one step in three, by 0.4 mm (farther than the candidates
+// reach): a world that keeps its caches against one whose caches are dropped before every step (a box query for
+// every sample in the collider's box), on two threads.
+TEST_F(ContactQuery, CertifiedNearestTrianglesGiveTheContactsOfFullQueries) {
+  write("sphere.obj", uv_sphere_obj(1.0, 48, 96));
+  const std::string text = R"({
+    "duration": 0.01,
+    "object": {"surface": {"box": {"min": [0.05, 0.05, 0.05], "max": [0.06, 0.06, 0.06]}},
+               "octree": {"base_level": 1, "max_level": 1}},
+    "rigid_bodies": [{"name": "ball", "shape": {"mesh": "sphere.obj", "scale": 0.01}, "motion": "fixed",
+                      "position": [0, 0, 0]}]
+  })";
+  const Scene scene = load_scene(write("scene.json", text).string());
+  constexpr double kDepth = 1e-3;  // m: the samples stay within half of it of the surface, where a full query (the
+                                   // search depth alone) and a tracked one (up to twice the last depth) agree
+  constexpr double kRadius = 0.01;  // m
+  std::uint64_t seed = 12345;
+  const auto uniform = [&seed] {  // in [-1, 1)
+    seed = seed * 6364136223846793005ull + 1442695040888963407ull;
+    return double(seed >> 11) / double(1ull << 52) - 1.0;
+  };
+  sim::ContactSamples samples;
+  samples.begin.push_back(0);
+  std::vector<Vec3> x;
+  std::vector<double> radius;  // m, each sample's distance from the centre, kept as it slides
+  for (int k = 0; k < 2000; ++k) {
+    const Vec3 dir = Vec3(uniform(), uniform(), uniform()).normalized();
+    radius.push_back(kRadius + 4.5e-4 * uniform());
+    if (std::abs(radius.back() - kRadius) < 5e-5) radius.back() = kRadius + 5e-5;
+    samples.dofs.push_back({int(x.size()), 1.0});
+    samples.begin.push_back(int(samples.dofs.size()));
+    samples.rest.push_back(radius.back() * dir);
+    samples.area.push_back(1e-8);
+    samples.face.push_back(-1);
+    x.push_back(radius.back() * dir);
+  }
+  ContactWorld kept(scene, {}, 1e9, kDepth), fresh(scene, {}, 1e9, kDepth);
+  sim::Executor executor(2);
+  long certified = 0, searched = 0, contacts = 0;
+  for (int step = 0; step < 30; ++step) {
+    const double t = 0.001 * step;
+    const std::vector<sim::Contact> a = kept.find(samples, x, t, 0.001, {}, {}, &executor);
+    certified += kept.profile().certified;
+    searched += kept.profile().searched;
+    fresh.reset_samples();
+    const std::vector<sim::Contact> b = fresh.find(samples, x, t, 0.001, {}, {}, &executor);
+    EXPECT_EQ(fresh.profile().certified, 0);
+    ASSERT_EQ(a.size(), b.size()) << "step " << step;
+    for (std::size_t k = 0; k < a.size(); ++k) {
+      ASSERT_EQ(a[k].dofs[0].dof, b[k].dofs[0].dof) << "step " << step;
+      EXPECT_EQ(a[k].penetration, b[k].penetration) << "step " << step << " sample " << a[k].dofs[0].dof;
+      EXPECT_EQ(a[k].normal, b[k].normal) << "step " << step << " sample " << a[k].dofs[0].dof;
+    }
+    contacts += long(a.size());
+    const double slide = step % 3 == 2 ? 4e-4 : 2e-6;  // m
+    for (std::size_t k = 0; k < x.size(); ++k) {
+      const Vec3 n = x[k].normalized();
+      Vec3 d(uniform(), uniform(), uniform());
+      d -= d.dot(n) * n;
+      x[k] = radius[k] * (x[k] + slide * d.normalized()).normalized();
+    }
+  }
+  EXPECT_GT(contacts, 10000);
+  // Most queries of samples that slid by 2 um are certified; none of those that slid by 0.4 mm.
+  EXPECT_GT(certified, searched / 2);
+  EXPECT_LT(certified, 2 * searched);
 }
 
 }  // namespace

@@ -181,13 +181,22 @@ void contact_system_terms(const std::vector<Contact>& contacts, double dt, const
 
 void add_system_blocks(const std::vector<SystemBlock>& blocks, SpMat& A) {
   double* val = A.valuePtr();
-  for (const SystemBlock& b : blocks)
+  const int* outer = A.outerIndexPtr();
+  for (const SystemBlock& b : blocks) {
+    // Rows 3 row, 3 row + 1, 3 row + 2 of a column are adjacent in the pattern, and columns 3 col, 3 col + 1 and
+    // 3 col + 2 hold the same rows (blocks are dense): one search finds the block in all three (checked).
+    const std::ptrdiff_t at = entry(A, 3 * b.row, 3 * b.col);
+    if (at < 0) continue;  // not for this pattern
+    const std::ptrdiff_t in_column = at - outer[3 * b.col];
     for (int c = 0; c < 3; ++c) {
-      // Rows 3 row, 3 row + 1, 3 row + 2 of a column are adjacent in the pattern (blocks are dense).
-      const std::ptrdiff_t at = entry(A, 3 * b.row, 3 * b.col + c);
-      if (at < 0) continue;  // not for this pattern
-      for (int r = 0; r < 3; ++r) val[at + r] += b.value(r, c);
+      std::ptrdiff_t at_c = outer[3 * b.col + c] + in_column;
+      if (at_c >= outer[3 * b.col + c + 1] || A.innerIndexPtr()[at_c] != 3 * b.row) {
+        at_c = entry(A, 3 * b.row, 3 * b.col + c);  // a pattern whose columns differ within the block
+        if (at_c < 0) continue;
+      }
+      for (int r = 0; r < 3; ++r) val[at_c + r] += b.value(r, c);
     }
+  }
 }
 
 void add_block_products(const std::vector<SystemBlock>& blocks, const VecX& x, VecX& y) {

@@ -2,6 +2,7 @@
 #include "run/contact_world.hpp"
 
 #include <BulletCollision/NarrowPhaseCollision/btGjkEpa2.h>
+#include <BulletCollision/NarrowPhaseCollision/btRaycastCallback.h>
 #include <BulletCollision/NarrowPhaseCollision/btVoronoiSimplexSolver.h>
 #include <btBulletDynamicsCommon.h>
 
@@ -217,6 +218,33 @@ double signed_distance(const Collider& c, const btTransform& pose, const Vec3& p
   return nearest_result(cb, pose, normal, clearance);
 }
 
+// The crossings of a segment with a mesh collider's surface, in its frame: Bullet's ray test against the BVH, every
+// triangle the segment meets counted (the callback keeps the whole segment).
+struct SurfaceCrossings : btTriangleRaycastCallback {
+  int count = 0;
+  SurfaceCrossings(const btVector3& from, const btVector3& to) : btTriangleRaycastCallback(from, to) {}
+  btScalar reportHit(const btVector3&, btScalar, int, int) override {
+    ++count;
+    return m_hitFraction;
+  }
+};
+
+// signed_distance with no limit on the distance: box queries of half-size `from` (m), each twice the last, until one
+// finds a triangle nearer than its half-size or holds the whole mesh. For a sample that went through a mesh's surface
+// faster than the search depth per step.
+double nearest_anywhere(const Collider& c, const btTransform& pose, const Vec3& p, double from, Vec3& normal,
+                        double& clearance, NearestCertificate* certificate) {
+  btVector3 lo, hi;
+  c.concave->getAabb(btTransform::getIdentity(), lo, hi);
+  const btVector3 point = pose.invXform(bt(p));
+  double reach = 0.0;  // m: a cube of this half-size around the point holds the mesh
+  for (int k = 0; k < 3; ++k) reach = std::max({reach, double(point[k] - lo[k]), double(hi[k] - point[k])});
+  for (double box = from;; box *= 2.0) {
+    const double d = signed_distance(c, pose, p, std::min(box, reach), normal, clearance, certificate);
+    if (d < std::min(box, reach) || box >= reach) return d;
+  }
+}
+
 // signed_distance for a sample whose penetration at its last query was `last` (m; 0: it was outside), searched
 // within `depth` (m) when it was outside. A sample inside a triangle mesh is followed deeper, so that a tool pressing
 // on keeps it: first within 1.25 `last` (the nearest triangle found there is the nearest within any larger cube, the
@@ -427,6 +455,10 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
   const btTransform tr = bt(pose);
   btVector3 lo, hi;
   c.shape->getAabb(tr, lo, hi);
+  // The box grown by what a sample can cover relative to the shape in a step: the search depth several times over
+  // and twice the shape's own step (m).
+  const double grow = 4.0 * depth + 2.0 * (pose_next.position - pose.position).norm();
+  const Vec3 near_lo = from_bt(lo) - Vec3::Constant(grow), near_hi = from_bt(hi) + Vec3::Constant(grow);
   const int n = samples.size();
   if (c.cache_local.size() != std::size_t(n)) {
     c.cache_local.assign(std::size_t(n), Vec3::Zero());
@@ -446,8 +478,17 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
       for (int i = s * kScan; i < std::min(n, (s + 1) * kScan); ++i) {
         const Vec3& p = positions[std::size_t(i)];
         if (p.x() < lo.x() || p.y() < lo.y() || p.z() < lo.z() || p.x() > hi.x() || p.y() > hi.y() ||
-            p.z() > hi.z())
+            p.z() > hi.z()) {
+          // Outside the shape's box but near it: remembered as outside there (in the collider's frame), so that
+          // a sample that enters the mesh deeper than the search depth within one step is found (see the queries).
+          if (c.concave && p.x() >= near_lo.x() && p.y() >= near_lo.y() && p.z() >= near_lo.z() &&
+              p.x() <= near_hi.x() && p.y() <= near_hi.y() && p.z() <= near_hi.z()) {
+            c.cache_local[std::size_t(i)] = pose.rotation.transpose() * (p - pose.position);
+            c.cache_clearance[std::size_t(i)] = 0.0;
+            c.last_depth[std::size_t(i)] = 0.0;
+          }
           continue;
+        }
         const Vec3 local = pose.rotation.transpose() * (p - pose.position);
         const double clearance = c.cache_clearance[std::size_t(i)];
         if (clearance > 0.0 && (local - c.cache_local[std::size_t(i)]).norm() < clearance) continue;
@@ -484,9 +525,25 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
         Vec3 normal = Vec3::UnitZ();
         double& last = c.last_depth[std::size_t(i)];
         bool certified = false;
-        const double d = tracked_distance(c, tr, p, depth, last, normal, c.cache_clearance[std::size_t(i)],
-                                          c.concave ? &c.certificate[std::size_t(i)] : nullptr, certified);
+        NearestCertificate* certificate = c.concave ? &c.certificate[std::size_t(i)] : nullptr;
+        double& clearance = c.cache_clearance[std::size_t(i)];
+        const bool was_outside = last == 0.0 && clearance >= 0.0;  // at its last query, at cache_local
+        double d = tracked_distance(c, tr, p, depth, last, normal, clearance, certificate, certified);
         ++(certified ? f.certified : f.searched);
+        const double searched = std::max(depth, 2.0 * last);  // m, the largest box tracked_distance searched
+        if (c.concave && d >= searched && (last > 0.0 || was_outside)) {
+          // Nothing within the box searched, for a sample that was inside (it went deeper than twice its depth in a
+          // step), or that was outside and went through the surface since (then it may be inside, deeper than the
+          // search looks): its nearest triangle, wherever it is, decides, by the side of its face the sample is on,
+          // as for every sample (not the crossings' parity, which a segment through an edge miscounts).
+          bool through = last > 0.0;
+          if (!through) {
+            SurfaceCrossings crossings(bt(c.cache_local[std::size_t(i)]), bt(local));
+            c.concave->performRaycast(&crossings, crossings.m_from, crossings.m_to);
+            through = crossings.count > 0;
+          }
+          if (through) d = nearest_anywhere(c, tr, p, 2.0 * searched, normal, clearance, certificate);
+        }
         c.cache_local[std::size_t(i)] = local;
         last = d < 0.0 ? -d : 0.0;
         if (!(d < 0.0)) continue;

@@ -479,12 +479,14 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
         const Vec3& p = positions[std::size_t(i)];
         if (p.x() < lo.x() || p.y() < lo.y() || p.z() < lo.z() || p.x() > hi.x() || p.y() > hi.y() ||
             p.z() > hi.z()) {
-          // Outside the shape's box but near it: remembered as outside there (in the collider's frame), so that
-          // a sample that enters the mesh deeper than the search depth within one step is found (see the queries).
+          // Outside the shape's box but near it: remembered as outside there (in the collider's frame), at least
+          // its distance from the box away from the surface, so that a sample that enters the mesh deeper than the
+          // search depth within one step is found (see the queries).
           if (c.concave && p.x() >= near_lo.x() && p.y() >= near_lo.y() && p.z() >= near_lo.z() &&
               p.x() <= near_hi.x() && p.y() <= near_hi.y() && p.z() <= near_hi.z()) {
+            const Vec3 gap = (from_bt(lo) - p).cwiseMax(p - from_bt(hi)).cwiseMax(0.0);
             c.cache_local[std::size_t(i)] = pose.rotation.transpose() * (p - pose.position);
-            c.cache_clearance[std::size_t(i)] = 0.0;
+            c.cache_clearance[std::size_t(i)] = gap.norm();
             c.last_depth[std::size_t(i)] = 0.0;
           }
           continue;
@@ -528,6 +530,7 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
         NearestCertificate* certificate = c.concave ? &c.certificate[std::size_t(i)] : nullptr;
         double& clearance = c.cache_clearance[std::size_t(i)];
         const bool was_outside = last == 0.0 && clearance >= 0.0;  // at its last query, at cache_local
+        const double was_clear = clearance;                          // m, free of the surface around cache_local
         double d = tracked_distance(c, tr, p, depth, last, normal, clearance, certificate, certified);
         ++(certified ? f.certified : f.searched);
         const double searched = std::max(depth, 2.0 * last);  // m, the largest box tracked_distance searched
@@ -536,8 +539,10 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
           // step), or that was outside and went through the surface since (then it may be inside, deeper than the
           // search looks): its nearest triangle, wherever it is, decides, by the side of its face the sample is on,
           // as for every sample (not the crossings' parity, which a segment through an edge miscounts).
+          // A segment that starts was_clear away from the surface and ends `depth` away from it reaches it only
+          // if it is at least as long as both together.
           bool through = last > 0.0;
-          if (!through) {
+          if (!through && (local - c.cache_local[std::size_t(i)]).norm() >= was_clear + depth) {
             SurfaceCrossings crossings(bt(c.cache_local[std::size_t(i)]), bt(local));
             c.concave->performRaycast(&crossings, crossings.m_from, crossings.m_to);
             through = crossings.count > 0;

@@ -239,6 +239,7 @@ double nearest_anywhere(const Collider& c, const btTransform& pose, const Vec3& 
   const btVector3 point = pose.invXform(bt(p));
   double reach = 0.0;  // m: a cube of this half-size around the point holds the mesh
   for (int k = 0; k < 3; ++k) reach = std::max({reach, double(point[k] - lo[k]), double(hi[k] - point[k])});
+  if (!std::isfinite(reach) || !(from > 0.0)) return signed_distance(c, pose, p, from, normal, clearance, certificate);
   for (double box = from;; box *= 2.0) {
     const double d = signed_distance(c, pose, p, std::min(box, reach), normal, clearance, certificate);
     if (d < std::min(box, reach) || box >= reach) return d;
@@ -538,9 +539,9 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
           // Nothing within the box searched, for a sample that was inside (it went deeper than twice its depth in a
           // step), or that was outside and went through the surface since (then it may be inside, deeper than the
           // search looks): its nearest triangle, wherever it is, decides, by the side of its face the sample is on,
-          // as for every sample (not the crossings' parity, which a segment through an edge miscounts).
-          // A segment that starts was_clear away from the surface and ends `depth` away from it reaches it only
-          // if it is at least as long as both together.
+          // as for every sample (not the crossings' parity, which a segment through an edge miscounts). A segment
+          // that starts was_clear away from the surface and ends `depth` away from it can reach the surface only if
+          // it is at least as long as both together.
           bool through = last > 0.0;
           if (!through && (local - c.cache_local[std::size_t(i)]).norm() >= was_clear + depth) {
             SurfaceCrossings crossings(bt(c.cache_local[std::size_t(i)]), bt(local));

@@ -480,11 +480,11 @@ void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& sample
         const Vec3& p = positions[std::size_t(i)];
         if (p.x() < lo.x() || p.y() < lo.y() || p.z() < lo.z() || p.x() > hi.x() || p.y() > hi.y() ||
             p.z() > hi.z()) {
-          // Outside the shape's box but near it: remembered as outside there (in the collider's frame), at least
-          // its distance from the box away from the surface, so that a sample that enters the mesh deeper than the
-          // search depth within one step is found (see the queries).
-          if (c.concave && p.x() >= near_lo.x() && p.y() >= near_lo.y() && p.z() >= near_lo.z() &&
-              p.x() <= near_hi.x() && p.y() <= near_hi.y() && p.z() <= near_hi.z()) {
+          // Outside the shape's box but near it, and not seen yet: remembered as outside there (in the collider's
+          // frame), at least its distance from the box away from the surface, so that a sample that enters the mesh
+          // deeper than the search depth within one step is found (see the queries).
+          if (c.concave && c.cache_clearance[std::size_t(i)] < 0.0 && p.x() >= near_lo.x() && p.y() >= near_lo.y() &&
+              p.z() >= near_lo.z() && p.x() <= near_hi.x() && p.y() <= near_hi.y() && p.z() <= near_hi.z()) {
             const Vec3 gap = (from_bt(lo) - p).cwiseMax(p - from_bt(hi)).cwiseMax(0.0);
             c.cache_local[std::size_t(i)] = pose.rotation.transpose() * (p - pose.position);
             c.cache_clearance[std::size_t(i)] = gap.norm();

@@ -72,25 +72,26 @@ Truth truth(const Vec3& p) {
   return {faces[0].first, faces[0].second, faces[1].first - faces[0].first};
 }
 
-class ContactQuery : public test::TempDirTest {};
+class ContactQuery : public test::TempDirTest {
+ protected:
+  // A scene whose one rigid body is the fixed mesh `obj` (an OBJ in cm): the L-shaped prism (l_prism_obj) by default.
+  Scene fixed_mesh_scene(const std::string& obj = l_prism_obj()) {
+    write("body.obj", obj);
+    const std::string text = R"({
+      "duration": 0.01,
+      "object": {"surface": {"box": {"min": [0.05, 0.05, 0.05], "max": [0.06, 0.06, 0.06]}},
+                 "octree": {"base_level": 1, "max_level": 1}},
+      "rigid_bodies": [{"name": "body", "shape": {"mesh": "body.obj", "scale": 0.01}, "motion": "fixed",
+                        "position": [0, 0, 0]}]
+    })";
+    return load_scene(write("scene.json", text).string());
+  }
+};
 
-TEST_F(ContactQuery, SamplesPressedDeepIntoAConcaveColliderGetTheirDistanceToItsSurface) {
-  write("l.obj", l_prism_obj());
-  const std::string text = R"({
-    "duration": 0.01,
-    "object": {"surface": {"box": {"min": [0.05, 0.05, 0.05], "max": [0.06, 0.06, 0.06]}},
-               "octree": {"base_level": 1, "max_level": 1}},
-    "rigid_bodies": [{"name": "l", "shape": {"mesh": "l.obj", "scale": 0.01}, "motion": "fixed",
-                      "position": [0, 0, 0]}]
-  })";
-  const Scene scene = load_scene(write("scene.json", text).string());
-  constexpr double kDepth = 5e-4;  // m, the search depth for samples that were outside
-  // Samples on a grid over the L's footprint (and a little beyond it), starting 0.2 mm above the top face and
-  // pushed down 0.15 mm per step, 40 steps: to 5.8 mm below the top face (below the prism's middle, where the side
-  // walls and the inner corner are the nearest faces).
-  sim::ContactSamples samples;
+// Samples on a grid over the L's footprint (and a little beyond it, 21 x 21 at 1 mm), 0.2 mm above its top face,
+// each its own DOF (x: their positions, m).
+void l_grid_samples(sim::ContactSamples& samples, std::vector<Vec3>& x) {
   samples.begin.push_back(0);
-  std::vector<Vec3> x;  // cm grid, stored in m
   for (double gx = 0.05; gx < 2.1; gx += 0.1)
     for (double gy = 0.05; gy < 2.1; gy += 0.1) {
       const Vec3 p(0.01 * gx, 0.01 * gy, 0.01 * kHeight + 2e-4);
@@ -101,6 +102,45 @@ TEST_F(ContactQuery, SamplesPressedDeepIntoAConcaveColliderGetTheirDistanceToIts
       samples.face.push_back(-1);
       x.push_back(p);
     }
+}
+
+// The contacts `c` of one step against the analytic truth for the grid at positions xs (m): every sample inside the
+// L-shaped prism has a contact, at its distance to the prism's boundary and with the outward normal of the nearest
+// face, and no other sample has one. Appends the checked contacts' penetrations (m).
+void expect_l_contacts(const std::vector<sim::Contact>& c, const std::vector<Vec3>& xs, int step,
+                       std::vector<double>& penetrations) {
+  std::size_t next = 0;
+  for (std::size_t i = 0; i < xs.size(); ++i) {
+    const Vec3 cm = 100.0 * xs[i];
+    const bool inside = in_l(cm.x(), cm.y()) && cm.z() > 0 && cm.z() < kHeight;
+    const bool has = next < c.size() && c[next].dofs[0].dof == int(i);
+    const Truth t = inside ? truth(cm) : Truth{};
+    // Points within float rounding (Bullet's btScalar) of a face may go either way.
+    if (inside && t.distance < 1e-5) {
+      if (has) ++next;
+      continue;
+    }
+    ASSERT_EQ(has, inside) << "step " << step << " sample " << i << " at " << cm.transpose() << " cm";
+    if (!has) continue;
+    const sim::Contact& k = c[next++];
+    EXPECT_NEAR(k.penetration, 0.01 * t.distance, 2e-8) << "step " << step << " sample " << i;
+    if (t.gap > 1e-3) {
+      EXPECT_GT(k.normal.dot(t.outward), 0.9999) << "step " << step << " sample " << i;
+    }
+    penetrations.push_back(k.penetration);
+  }
+  EXPECT_EQ(next, c.size());
+}
+
+TEST_F(ContactQuery, SamplesPressedDeepIntoAConcaveColliderGetTheirDistanceToItsSurface) {
+  const Scene scene = fixed_mesh_scene();
+  constexpr double kDepth = 5e-4;  // m, the search depth for samples that were outside
+  // Samples on a grid over the L's footprint (and a little beyond it), starting 0.2 mm above the top face and
+  // pushed down 0.15 mm per step, 40 steps: to 5.8 mm below the top face (below the prism's middle, where the side
+  // walls and the inner corner are the nearest faces).
+  sim::ContactSamples samples;
+  std::vector<Vec3> x;
+  l_grid_samples(samples, x);
   std::vector<std::vector<sim::Contact>> found[2];
   for (const int threads : {1, 2}) {
     ContactWorld world(scene, {}, 1e9, kDepth);
@@ -112,7 +152,7 @@ TEST_F(ContactQuery, SamplesPressedDeepIntoAConcaveColliderGetTheirDistanceToIts
     }
   }
   ASSERT_EQ(found[0].size(), found[1].size());
-  int checked = 0, deep = 0;
+  std::vector<double> penetrations;  // m, of the contacts checked
   std::vector<Vec3> xs = x;
   for (std::size_t step = 0; step < found[0].size(); ++step) {
     const std::vector<sim::Contact>& c = found[0][step];
@@ -123,32 +163,14 @@ TEST_F(ContactQuery, SamplesPressedDeepIntoAConcaveColliderGetTheirDistanceToIts
       ASSERT_EQ(c[k].penetration, found[1][step][k].penetration);
     }
     // Every sample inside the prism has a contact, and no other.
-    std::size_t next = 0;
-    for (std::size_t i = 0; i < xs.size(); ++i) {
-      const Vec3 cm = 100.0 * xs[i];
-      const bool inside = in_l(cm.x(), cm.y()) && cm.z() > 0 && cm.z() < kHeight;
-      const bool has = next < c.size() && c[next].dofs[0].dof == int(i);
-      const Truth t = inside ? truth(cm) : Truth{};
-      // Points within float rounding (Bullet's btScalar) of a face may go either way.
-      if (inside && t.distance < 1e-5) {
-        if (has) ++next;
-        continue;
-      }
-      ASSERT_EQ(has, inside) << "step " << step << " sample " << i << " at " << cm.transpose() << " cm";
-      if (!has) continue;
-      const sim::Contact& k = c[next++];
-      EXPECT_NEAR(k.penetration, 0.01 * t.distance, 2e-8) << "step " << step << " sample " << i;
-      if (t.gap > 1e-3) {
-        EXPECT_GT(k.normal.dot(t.outward), 0.9999) << "step " << step << " sample " << i;
-      }
-      ++checked;
-      if (k.penetration > 4.0 * kDepth) ++deep;
-    }
-    EXPECT_EQ(next, c.size());
+    expect_l_contacts(c, xs, int(step), penetrations);
+    if (HasFatalFailure()) return;
     for (Vec3& p : xs) p.z() -= 1.5e-4;
   }
-  EXPECT_GT(checked, 5000);
-  EXPECT_GT(deep, 1000);  // tracked far deeper than the search depth
+  EXPECT_GT(penetrations.size(), 5000u);
+  // Tracked far deeper than the search depth.
+  const auto deep = std::count_if(penetrations.begin(), penetrations.end(), [](double d) { return d > 4.0 * kDepth; });
+  EXPECT_GT(deep, 1000);
 }
 
 // Samples that go through a mesh's surface faster than the search depth per step (a quick stab: 1.5 mm per step
@@ -156,58 +178,22 @@ TEST_F(ContactQuery, SamplesPressedDeepIntoAConcaveColliderGetTheirDistanceToIts
 // since their last query crosses the surface, so they are searched for farther and collide at their distance to the
 // surface. Samples over the L's notch fall past it and stay outside.
 TEST_F(ContactQuery, SamplesThatGoThroughTheSurfaceFasterThanTheSearchDepthCollide) {
-  write("l.obj", l_prism_obj());
-  const std::string text = R"({
-    "duration": 0.01,
-    "object": {"surface": {"box": {"min": [0.05, 0.05, 0.05], "max": [0.06, 0.06, 0.06]}},
-               "octree": {"base_level": 1, "max_level": 1}},
-    "rigid_bodies": [{"name": "l", "shape": {"mesh": "l.obj", "scale": 0.01}, "motion": "fixed",
-                      "position": [0, 0, 0]}]
-  })";
-  const Scene scene = load_scene(write("scene.json", text).string());
+  const Scene scene = fixed_mesh_scene();
   constexpr double kDepth = 5e-4;  // m
   constexpr double kStep = 1.5e-3;  // m per step, three times the search depth
   sim::ContactSamples samples;
-  samples.begin.push_back(0);
   std::vector<Vec3> x;
-  for (double gx = 0.05; gx < 2.1; gx += 0.1)
-    for (double gy = 0.05; gy < 2.1; gy += 0.1) {
-      const Vec3 p(0.01 * gx, 0.01 * gy, 0.01 * kHeight + 2e-4);
-      samples.dofs.push_back({int(x.size()), 1.0});
-      samples.begin.push_back(int(samples.dofs.size()));
-      samples.rest.push_back(p);
-      samples.area.push_back(1e-6);
-      samples.face.push_back(-1);
-      x.push_back(p);
-    }
+  l_grid_samples(samples, x);
   ContactWorld world(scene, {}, 1e9, kDepth);
   sim::Executor executor(2);
-  int checked = 0;
+  std::vector<double> penetrations;  // m, of the contacts checked
   for (int step = 0; step < 6; ++step) {
     const std::vector<sim::Contact> c = world.find(samples, x, 0.001 * step, 0.001, {}, {}, &executor);
-    std::size_t next = 0;
-    for (std::size_t i = 0; i < x.size(); ++i) {
-      const Vec3 cm = 100.0 * x[i];
-      const bool inside = in_l(cm.x(), cm.y()) && cm.z() > 0 && cm.z() < kHeight;
-      const bool has = next < c.size() && c[next].dofs[0].dof == int(i);
-      const Truth t = inside ? truth(cm) : Truth{};
-      if (inside && t.distance < 1e-5) {  // within rounding of a face
-        if (has) ++next;
-        continue;
-      }
-      ASSERT_EQ(has, inside) << "step " << step << " sample " << i << " at " << cm.transpose() << " cm";
-      if (!has) continue;
-      const sim::Contact& k = c[next++];
-      EXPECT_NEAR(k.penetration, 0.01 * t.distance, 2e-8) << "step " << step << " sample " << i;
-      if (t.gap > 1e-3) {
-        EXPECT_GT(k.normal.dot(t.outward), 0.9999) << "step " << step << " sample " << i;
-      }
-      ++checked;
-    }
-    EXPECT_EQ(next, c.size());
+    expect_l_contacts(c, x, step, penetrations);
+    if (HasFatalFailure()) return;
     for (Vec3& p : x) p.z() -= kStep;
   }
-  EXPECT_EQ(checked, 5 * 300);  // the 300 samples over the L, inside it from the second step on
+  EXPECT_EQ(penetrations.size(), 5u * 300u);  // the 300 samples over the L, inside it from the second step on
 }
 
 // A UV sphere of radius `r` (cm) as an OBJ, outward oriented: `lat` rings of `lon` vertices between the poles.
@@ -243,15 +229,7 @@ std::string uv_sphere_obj(double r, int lat, int lon) {
 // reach): a world that keeps its caches against one whose caches are dropped before every step (a box query for
 // every sample in the collider's box), on two threads.
 TEST_F(ContactQuery, CertifiedNearestTrianglesGiveTheContactsOfFullQueries) {
-  write("sphere.obj", uv_sphere_obj(1.0, 48, 96));
-  const std::string text = R"({
-    "duration": 0.01,
-    "object": {"surface": {"box": {"min": [0.05, 0.05, 0.05], "max": [0.06, 0.06, 0.06]}},
-               "octree": {"base_level": 1, "max_level": 1}},
-    "rigid_bodies": [{"name": "ball", "shape": {"mesh": "sphere.obj", "scale": 0.01}, "motion": "fixed",
-                      "position": [0, 0, 0]}]
-  })";
-  const Scene scene = load_scene(write("scene.json", text).string());
+  const Scene scene = fixed_mesh_scene(uv_sphere_obj(1.0, 48, 96));
   constexpr double kDepth = 1e-3;  // m: the samples stay within half of it of the surface, where a full query (the
                                    // search depth alone) and a tracked one (up to twice the last depth) agree
   constexpr double kRadius = 0.01;  // m

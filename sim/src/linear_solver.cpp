@@ -6,6 +6,7 @@
 
 #include "octocut/sim/hex_element.hpp"
 #include "octocut/sim/parallel.hpp"
+#include "supernodal_factor.hpp"
 #include "supernodal_solve.hpp"
 
 #include <algorithm>
@@ -145,18 +146,27 @@ class CholmodFactor {
     cholmod_free_factor(&Lb, &m_cb);
   }
   /// Numeric factorisation of A (pattern as analysed). False when A is not positive definite.
+  /// With a single- or half-precision copy kept and single_factorization set (keep_single), the factor is
+  /// computed in single precision (SupernodalFactorizer), unless that failed the probe earlier in this analysis; by
+  /// CHOLMOD in double when it fails or fails the probe (solve() has a double factor only then).
   bool factorize(const SpMat& A) {
     if (m_L == nullptr) return false;
-    cholmod_sparse a = view(A);
+    m_have_double = false;
     serial_openmp_here();  // CHOLMOD's 4-thread OpenMP teams spin against the step on two cores
+    if (m_keep_single && m_single_factorization && !m_double_only &&
+        m_factorizer.factorize(structure(), static_cast<const int*>(m_L->Perm), A, m_xf)) {
+      m_plan.pack(structure(), m_xf.data(), false, m_single);
+      if (probe_error(A, true) <= m_single_probe) {
+        if (m_plan.packed_size() > m_half_above) keep_copy(A, m_xf.data());
+        return true;
+      }
+      m_double_only = true;  // this pattern's matrices need the digits: factorise them in double from now on
+    }
+    cholmod_sparse a = view(A);
     cholmod_factorize(&a, m_L, &m_c);
     const bool ok = m_c.status >= CHOLMOD_OK && m_L->minor == m_L->n;
-    if (ok && m_keep_single) {
-      const auto* x = static_cast<const double*>(m_L->x);
-      const bool large = m_plan.packed_size() > m_half_above;
-      m_plan.pack(structure(), x, large, m_single);
-      if (large && !half_preconditions(A)) m_plan.pack(structure(), x, false, m_single);
-    }
+    m_have_double = ok;
+    if (ok && m_keep_single) keep_copy(A, static_cast<const double*>(m_L->x));
     return ok;
   }
   /// Forgets the analysis and the factor (analyzed() is false after).
@@ -172,6 +182,12 @@ class CholmodFactor {
     m_keep_single = keep;
     m_half_above = half_above;
     m_half_probe = half_probe;
+  }
+  /// Computes the factor in single precision when it keeps a copy (LinearSolverOptions::single_precision_
+  /// factorization), while the copy solves its own matrix to within `probe` on a smooth vector (probe_error).
+  void single_factorization(bool on, double probe) {
+    m_single_factorization = on;
+    m_single_probe = probe;
   }
   /// x = (L L^T)^-1 b (in A's ordering) with the single- or half-precision copy of the last factor, in single
   /// arithmetic: the preconditioner of PCG. The solves run on two of the executor's threads (SupernodalSolvePlan;
@@ -191,7 +207,7 @@ class CholmodFactor {
   }
   /// x = A^-1 b with the last factor. False when CHOLMOD fails.
   bool solve(const VecX& b, VecX& x) {
-    if (m_L == nullptr) return false;
+    if (m_L == nullptr || !m_have_double) return false;
     cholmod_dense bd{};
     bd.nrow = std::size_t(b.size());
     bd.ncol = 1;
@@ -221,20 +237,35 @@ class CholmodFactor {
     if (m_L) cholmod_free_factor(&m_L, &m_c);
     m_L = nullptr;
     m_single = PackedFactor{};
+    m_have_double = m_double_only = false;
   }
 
+  // Packs the factor's values x (CHOLMOD's layout) into the copy that solve_single reads: in half precision when
+  // large and when that preconditions A well enough, else in single.
+  template <class T>
+  void keep_copy(const SpMat& A, const T* x) {
+    const bool large = m_plan.packed_size() > m_half_above;
+    m_plan.pack(structure(), x, large, m_single);
+    if (large && !half_preconditions(A)) m_plan.pack(structure(), x, false, m_single);
+  }
   // Whether the half-precision copy of the factor (m_single, just packed) preconditions its own matrix A well
   // enough: |z - v| / |v| <= m_half_probe for z = (L~ L~^T)^-1 A v, L~ the copy and v a fixed vector of entries in
   // [-1, 1). Half precision gives 5e-4 to 4e-3 on the meniscus (E = 2e5 Pa, nu = 0.45) and the cubes of `octocut
   // bench scaling`, but 0.015-16 on stiffer tissue (the meniscus at base level 6 with E = 1e6-1e9 Pa, nu =
   // 0.45-0.499), where it costs PCG up to 4.9 times the iterations of single precision (docs/RESULTS.md).
-  bool half_preconditions(const SpMat& A) {
+  bool half_preconditions(const SpMat& A) { return probe_error(A, false) <= m_half_probe; }
+  // |z - v| / |v| for z = (L~ L~^T)^-1 A v, L~ the copy solve_single reads: v a fixed vector of entries in [-1, 1),
+  // or a smooth one (every entry 1), which stresses the directions a single-precision factorisation resolves worst,
+  // those of A's smallest eigenvalues (translations, which only the mass resists; near-incompressible modes).
+  double probe_error(const SpMat& A, bool smooth) {
     const Eigen::Index n = A.cols();
     VecX v(n), z;
-    for (Eigen::Index k = 0; k < n; ++k) v[k] = double((std::uint32_t(k) * 2654435761u) >> 16) / 32768.0 - 1.0;
+    for (Eigen::Index k = 0; k < n; ++k)
+      v[k] = smooth ? 1.0 : double((std::uint32_t(k) * 2654435761u) >> 16) / 32768.0 - 1.0;
     const VecX b = A.selfadjointView<Eigen::Lower>() * v;  // A's lower triangle, as CHOLMOD reads it (stype -1)
-    if (!solve_single(b, z, nullptr)) return false;
-    return (z - v).norm() <= m_half_probe * v.norm();
+    if (!solve_single(b, z, nullptr)) return std::numeric_limits<double>::infinity();
+    const double e = (z - v).norm() / v.norm();
+    return std::isfinite(e) ? e : std::numeric_limits<double>::infinity();
   }
 
   // The supernodal structure of the analysed factor.
@@ -378,6 +409,12 @@ class CholmodFactor {
   PackedFactor m_single;         ///< L's values in single or half precision, when kept (m_plan's packed layout)
   std::vector<float> m_perm;    ///< solve_single's permuted right-hand side (n)
   SupernodalSolvePlan m_plan;   ///< how solve_single splits its triangular solves between two threads
+  SupernodalFactorizer m_factorizer;  ///< the numeric factorisation in single precision (keep_single)
+  std::vector<float> m_xf;            ///< its values (CHOLMOD's layout)
+  bool m_have_double = false;         ///< whether m_L holds a numeric factor (solve)
+  bool m_single_factorization = false;  ///< factorise in single precision (single_factorization)
+  double m_single_probe = 0.0;          ///< the copy's largest probe error for that
+  bool m_double_only = false;           ///< a single-precision factorisation of this analysis failed its probe
   cholmod_dense* m_x = nullptr;  ///< solve2 workspaces, kept
   cholmod_dense* m_y = nullptr;
   cholmod_dense* m_e = nullptr;
@@ -704,6 +741,7 @@ class PcgSolver final : public LinearSolver {
     m_pending_in = -1;
     if (m_use_cholesky) {
       m_front->keep_single(m_single, m_opt.half_precision_entries, m_opt.half_precision_probe);
+      m_front->single_factorization(m_opt.single_precision_factorization, m_opt.tolerance);
       m_front->thorough_ordering(m_opt.thorough_ordering);
       if (m_opt.factor_lag_solves > 0)
         m_front->clear();
@@ -852,6 +890,7 @@ class PcgSolver final : public LinearSolver {
     m_pending->A = m_A->matrix();
     m_pending->factor = m_back ? std::move(m_back) : std::make_unique<CholmodFactor>();
     m_pending->factor->keep_single(m_single, m_opt.half_precision_entries, m_opt.half_precision_probe);
+    m_pending->factor->single_factorization(m_opt.single_precision_factorization, m_opt.tolerance);
     m_pending->factor->thorough_ordering(m_opt.thorough_ordering);
     m_pending->fast = m_fast_now;
     m_pending->rotations = m_rotations_now;

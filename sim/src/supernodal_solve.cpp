@@ -128,6 +128,15 @@ int SupernodalSolvePlan::leading_dimension(int nsrow) {
 }
 
 void SupernodalSolvePlan::pack(const SupernodalStructure& L, const double* x, bool half, PackedFactor& packed) const {
+  pack_values(L, x, half, packed);
+}
+
+void SupernodalSolvePlan::pack(const SupernodalStructure& L, const float* x, bool half, PackedFactor& packed) const {
+  pack_values(L, x, half, packed);
+}
+
+template <class T>
+void SupernodalSolvePlan::pack_values(const SupernodalStructure& L, const T* x, bool half, PackedFactor& packed) const {
   if (half) {
     std::vector<float>().swap(packed.values);
     packed.codes.assign(packed_size(), 0);
@@ -140,22 +149,22 @@ void SupernodalSolvePlan::pack(const SupernodalStructure& L, const double* x, bo
   for (int s = 0; s < L.nsuper; ++s) {
     const int nscol = L.super[s + 1] - L.super[s], nsrow = L.pi[s + 1] - L.pi[s], ld = leading_dimension(nsrow);
     for (int j = 0; j < nscol; ++j) {
-      const double* from = x + L.px[s] + std::ptrdiff_t(j) * nsrow;
+      const T* from = x + L.px[s] + std::ptrdiff_t(j) * nsrow;
       const std::ptrdiff_t at = m_px[std::size_t(s)] + std::ptrdiff_t(j) * ld;
       const auto col = std::size_t(L.super[s] + j);
-      packed.diag_inv[col] = float(1.0 / from[j]);  // the kernels multiply by the diagonal's reciprocal
+      packed.diag_inv[col] = float(1.0 / double(from[j]));  // the kernels multiply by the diagonal's reciprocal
       if (!half) {
         for (int i = j + 1; i < nsrow; ++i) packed.values[std::size_t(at + i)] = float(from[i]);
         continue;
       }
       double largest = 0.0;
-      for (int i = j + 1; i < nsrow; ++i) largest = std::max(largest, std::abs(from[i]));
+      for (int i = j + 1; i < nsrow; ++i) largest = std::max(largest, std::abs(double(from[i])));
       // The scale 2^k puts the largest entry in [2^14, 2^15) (half precision's largest normal: 65504), within
       // single precision's range.
       const int k = largest > 0.0 ? std::clamp(std::ilogb(largest) - 14, -126, 127) : 0;
       packed.scale[col] = std::ldexp(1.0f, k);
       const double unscale = std::ldexp(1.0, -k);  // exact products: a power of two, nothing overflows
-      for (int i = j + 1; i < nsrow; ++i) packed.codes[std::size_t(at + i)] = half_code(from[i] * unscale);
+      for (int i = j + 1; i < nsrow; ++i) packed.codes[std::size_t(at + i)] = half_code(double(from[i]) * unscale);
     }
   }
 }

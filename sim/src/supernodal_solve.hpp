@@ -55,6 +55,8 @@ class SupernodalSolvePlan {
   /// dimension; the diagonal blocks' upper triangles and diagonals are zeros; the diagonal entries' reciprocals and
   /// the columns' scales apart.
   void pack(const SupernodalStructure& L, const double* x, bool half, PackedFactor& packed) const;
+  /// The same from values in single precision (SupernodalFactorizer's).
+  void pack(const SupernodalStructure& L, const float* x, bool half, PackedFactor& packed) const;
   /// The values the solves use, in CHOLMOD's layout (px[nsuper], the upper triangles zero): what pack() kept of x.
   [[nodiscard]] std::vector<double> unpack(const SupernodalStructure& L, const PackedFactor& packed) const;
   [[nodiscard]] std::size_t packed_size() const { return m_px.empty() ? 0 : std::size_t(m_px.back()); }
@@ -76,6 +78,8 @@ class SupernodalSolvePlan {
   void backward_range(const SupernodalStructure& L, const PackedFactor& packed, float* y, int first, int last,
                       std::vector<float>& w);
   [[nodiscard]] static int leading_dimension(int nsrow);
+  template <class T>
+  void pack_values(const SupernodalStructure& L, const T* x, bool half, PackedFactor& packed) const;
 
   std::vector<long> m_px;       ///< start of each supernode's values in the packed layout (nsuper + 1)
   std::vector<int> m_super_of;  ///< supernode of each column (n)

@@ -97,9 +97,12 @@ struct LinearSolverOptions {
   /// pcg with the lagged Cholesky preconditioner: how many more floating-point operations per second the supernodal
   /// factorisation does than the triangular solves of a PCG iteration. The factor is refreshed once the iterations
   /// paid for its age cost as much as a factorisation (see make_linear_solver). Measured on the meniscus (7k
-  /// unknowns, 2.3e8 operations per factorisation, 5.2e6 per iteration with the single-precision factor): a
-  /// factorisation (49 ms, two threads) took as long as 58 iterations (0.85 ms each), so 44 / 58.
-  double factor_flop_advantage = 0.75;
+  /// unknowns, 2.3e8 operations per factorisation, 5.5e6 per iteration with the single-precision factor): the
+  /// single-precision factorisation takes 9.5-10.5 ms on one thread (23 GFlop/s), an iteration 0.35 ms without
+  /// contact and 0.6 ms with it (9-16 GFlop/s), so 1.5-2.5; the refresh runs on the second core beside the step, and
+  /// `meniscus_punch` runs fastest at 3-4 (real-time factor, median of five runs: 0.379 at 0.75, 0.409 at 3, 0.406
+  /// at 4, 0.361 at 6; docs/RESULTS.md). With CHOLMOD's double factorisation (49 ms on two threads then) it was 0.75.
+  double factor_flop_advantage = 3.0;
   /// pcg with the lagged Cholesky preconditioner: solve with a single-precision copy of the factor (in single
   /// precision: the triangular solves read L once per iteration, and this halves its bytes). The preconditioner
   /// is then the factor's value rounded to single precision, which converges in the same number of iterations.

@@ -269,16 +269,7 @@ class CholmodFactor {
   }
 
   // The supernodal structure of the analysed factor.
-  [[nodiscard]] SupernodalStructure structure() const {
-    SupernodalStructure L;
-    L.n = int(m_L->n);
-    L.nsuper = int(m_L->nsuper);
-    L.super = static_cast<const int*>(m_L->super);
-    L.pi = static_cast<const int*>(m_L->pi);
-    L.px = static_cast<const int*>(m_L->px);
-    L.rows = static_cast<const int*>(m_L->s);
-    return L;
-  }
+  [[nodiscard]] SupernodalStructure structure() const { return supernodal_structure_of(*m_L); }
 
   // A square, compressed, sorted CSC matrix with int indices (n columns, nzmax entries) as a symmetric CHOLMOD
   // matrix whose lower triangle is read; a pattern when x is null.

@@ -30,6 +30,20 @@ struct SupernodalStructure {
   const int* rows = nullptr;   ///< row indices (pi[nsuper])
 };
 
+/// The structure of a supernodal cholmod_factor (any type with its members n, nsuper, super, pi, px, s; this
+/// header does not include CHOLMOD's), viewed, not copied.
+template <class Factor>
+[[nodiscard]] SupernodalStructure supernodal_structure_of(const Factor& f) {
+  SupernodalStructure L;
+  L.n = int(f.n);
+  L.nsuper = int(f.nsuper);
+  L.super = static_cast<const int*>(f.super);
+  L.pi = static_cast<const int*>(f.pi);
+  L.px = static_cast<const int*>(f.px);
+  L.rows = static_cast<const int*>(f.s);
+  return L;
+}
+
 /// L's values as the solves read them (SupernodalSolvePlan::pack; the encodings: supernode_kernels.hpp): in single
 /// precision, or in half precision with a scale per column.
 struct PackedFactor {

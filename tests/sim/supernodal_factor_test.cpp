@@ -71,16 +71,7 @@ class Analysis {
   Analysis(const Analysis&) = delete;
   Analysis& operator=(const Analysis&) = delete;
   [[nodiscard]] bool ok() const { return m_L != nullptr && m_L->is_super; }
-  [[nodiscard]] SupernodalStructure structure() const {
-    SupernodalStructure L;
-    L.n = int(m_L->n);
-    L.nsuper = int(m_L->nsuper);
-    L.super = static_cast<const int*>(m_L->super);
-    L.pi = static_cast<const int*>(m_L->pi);
-    L.px = static_cast<const int*>(m_L->px);
-    L.rows = static_cast<const int*>(m_L->s);
-    return L;
-  }
+  [[nodiscard]] SupernodalStructure structure() const { return supernodal_structure_of(*m_L); }
   [[nodiscard]] const int* perm() const { return static_cast<const int*>(m_L->Perm); }
 
  private:

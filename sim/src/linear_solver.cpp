@@ -238,6 +238,7 @@ class CholmodFactor {
     m_L = nullptr;
     m_single = PackedFactor{};
     m_have_double = m_double_only = false;
+    m_factorizer.forget();  // its assembly plan is for this analysis
   }
 
   // Packs the factor's values x (CHOLMOD's layout) into the copy that solve_single reads: in half precision when

@@ -25,6 +25,13 @@ class SupernodalFactorizer {
   /// pivot is not positive or anything is not finite (the matrix is not positive definite in single precision), or
   /// when A has an entry outside L's pattern.
   bool factorize(const SupernodalStructure& L, const int* perm, const SpMat& A, std::vector<float>& x);
+  /// Forgets the assembly planned for A's pattern: call when L's structure or ordering changes (a new analysis),
+  /// since the plan is kept while A's pattern stays the same.
+  void forget() {
+    m_outer.clear();
+    m_inner.clear();
+    m_dest.clear();
+  }
 
  private:
   [[nodiscard]] bool same_pattern(const SpMat& A) const;

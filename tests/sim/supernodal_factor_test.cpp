@@ -46,10 +46,15 @@ SpMat grid_system(int m, double shift, unsigned seed) {
 // CHOLMOD's supernodal analysis of A's pattern (its structure; the factor's values are not used).
 class Analysis {
  public:
-  explicit Analysis(const SpMat& A) {
+  explicit Analysis(const SpMat& A, bool natural = false) {
     cholmod_start(&m_c);
     m_c.print = 0;
     m_c.supernodal = CHOLMOD_SUPERNODAL;
+    if (natural) {  // the matrix's own ordering instead of AMD's
+      m_c.nmethods = 1;
+      m_c.method[0].ordering = CHOLMOD_NATURAL;
+      m_c.postorder = 0;
+    }
     cholmod_sparse a{};
     a.nrow = a.ncol = std::size_t(A.rows());
     a.nzmax = std::size_t(A.nonZeros());
@@ -171,6 +176,22 @@ TEST(SupernodalFactor, RefusesIndefiniteAndNonFiniteMatricesAndEntriesOutsideThe
   wider.makeCompressed();
   EXPECT_FALSE(factorizer.factorize(L, analysis.perm(), wider, x));
   EXPECT_TRUE(factorizer.factorize(L, analysis.perm(), A, x)) << "and the original pattern again";
+}
+
+// The assembly is planned once per pattern of A; after forget() a factorisation on another analysis of the same
+// pattern (another ordering) plans anew and matches a fresh factorizer's bits.
+TEST(SupernodalFactor, ForgettingThePlanFollowsANewAnalysisOfTheSamePattern) {
+  const SpMat A = grid_system(5, 0.05, 4);
+  const Analysis amd(A), natural(A, true);
+  ASSERT_TRUE(amd.ok() && natural.ok());
+  SupernodalFactorizer reused, fresh;
+  std::vector<float> x1, x2, x3;
+  ASSERT_TRUE(reused.factorize(amd.structure(), amd.perm(), A, x1));
+  reused.forget();
+  ASSERT_TRUE(reused.factorize(natural.structure(), natural.perm(), A, x2));
+  ASSERT_TRUE(fresh.factorize(natural.structure(), natural.perm(), A, x3));
+  ASSERT_EQ(x2.size(), x3.size());
+  for (std::size_t i = 0; i < x2.size(); ++i) ASSERT_TRUE(x2[i] == x3[i]) << "value " << i;
 }
 
 }  // namespace

@@ -104,8 +104,9 @@ struct LinearSolverOptions {
   /// at 4, 0.361 at 6; docs/RESULTS.md). With CHOLMOD's double factorisation (49 ms on two threads then) it was 0.75.
   double factor_flop_advantage = 3.0;
   /// pcg with the lagged Cholesky preconditioner: solve with a single-precision copy of the factor (in single
-  /// precision: the triangular solves read L once per iteration, and this halves its bytes). The preconditioner
-  /// is then the factor's value rounded to single precision, which converges in the same number of iterations.
+  /// precision: the triangular solves read L once per iteration, and this halves its bytes). Rounded from CHOLMOD's
+  /// double factor, it converges in the same number of iterations; it is computed in single precision itself where
+  /// single_precision_factorization allows.
   bool single_precision_factor = true;
   /// pcg with that copy: a factor with more entries than this (in the solves' padded layout) is copied in half
   /// precision instead, each column scaled by a power of two (11 significant bits; sim/src/supernode_kernels.hpp),

@@ -108,6 +108,13 @@ struct LinearSolverOptions {
   /// double factor, it converges in the same number of iterations; it is computed in single precision itself where
   /// single_precision_factorization allows.
   bool single_precision_factor = true;
+  /// pcg with that copy: compute the factor in single precision too (sim/src/supernodal_factor.hpp), about twice
+  /// as fast as CHOLMOD's double factorisation, so that the lagged factor can be refreshed twice as often for the
+  /// same time on the second core. Its backward error is single precision's, which the smallest eigenvalues' modes
+  /// feel most: each such factor is checked on a smooth vector (the copy must solve its own matrix to within
+  /// `tolerance` there, so that PCG with a fresh factor still converges at once), and one that fails is replaced by
+  /// CHOLMOD's, which then factorises every later matrix of the same pattern.
+  bool single_precision_factorization = true;
   /// pcg with that copy: a factor with more entries than this (in the solves' padded layout) is copied in half
   /// precision instead, each column scaled by a power of two (11 significant bits; sim/src/supernode_kernels.hpp),
   /// which halves the bytes each triangular solve streams once the factor no longer fits the caches: at the
@@ -116,13 +123,6 @@ struct LinearSolverOptions {
   /// threshold the factor fits the caches and half precision saves nothing. The copy is kept in half precision only
   /// when it solves its own matrix to within `half_precision_probe` (relative error on a fixed vector); otherwise, as
   /// for stiff nearly incompressible tissue whose factor needs more digits, in single precision.
-  /// pcg with that copy: compute the factor in single precision too (sim/src/supernodal_factor.hpp), about twice
-  /// as fast as CHOLMOD's double factorisation, so that the lagged factor can be refreshed twice as often for the
-  /// same time on the second core. Its backward error is single precision's, which the smallest eigenvalues' modes
-  /// feel most: each such factor is checked on a smooth vector (the copy must solve its own matrix to within
-  /// `tolerance` there, so that PCG with a fresh factor still converges at once), and one that fails is replaced by
-  /// CHOLMOD's, which then factorises every later matrix of the same pattern.
-  bool single_precision_factorization = true;
   std::size_t half_precision_entries = std::size_t(1) << 21;
   double half_precision_probe = 0.01;
   /// pcg with the lagged Cholesky preconditioner: a refresh of the factor runs on a second thread and is swapped in

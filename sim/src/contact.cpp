@@ -179,23 +179,51 @@ void contact_system_terms(const std::vector<Contact>& contacts, double dt, const
   }
 }
 
-void add_system_blocks(const std::vector<SystemBlock>& blocks, SpMat& A) {
+void add_system_blocks(const std::vector<SystemBlock>& blocks, SpMat& A, const std::vector<int>* column_of) {
+  if (blocks.empty()) return;
   double* val = A.valuePtr();
   const int* outer = A.outerIndexPtr();
-  for (const SystemBlock& b : blocks) {
-    // Rows 3 row, 3 row + 1, 3 row + 2 of a column are adjacent in the pattern, and columns 3 col, 3 col + 1 and
-    // 3 col + 2 hold the same rows (blocks are dense): one search finds the block in all three (checked).
-    const std::ptrdiff_t at = entry(A, 3 * b.row, 3 * b.col);
-    if (at < 0) continue;  // not for this pattern
-    const std::ptrdiff_t in_column = at - outer[3 * b.col];
-    for (int c = 0; c < 3; ++c) {
-      std::ptrdiff_t at_c = outer[3 * b.col + c] + in_column;
-      if (at_c >= outer[3 * b.col + c + 1] || A.innerIndexPtr()[at_c] != 3 * b.row) {
-        at_c = entry(A, 3 * b.row, 3 * b.col + c);  // a pattern whose columns differ within the block
-        if (at_c < 0) continue;
+  const int* inner = A.innerIndexPtr();
+  // Each block's column block of A (-1: none).
+  const auto target = [&](const SystemBlock& b) {
+    if (column_of == nullptr) return b.col;
+    return std::size_t(b.col) < column_of->size() ? (*column_of)[std::size_t(b.col)] : -1;
+  };
+  const int nc = int(A.cols() / 3);
+  // The blocks by column block, each column's in the blocks' order (a counting sort), so that every entry receives
+  // its blocks in the same order as one pass over the list would add them.
+  std::vector<int> start(std::size_t(nc) + 1, 0);
+  for (const SystemBlock& b : blocks)
+    if (const int k = target(b); k >= 0 && k < nc) ++start[std::size_t(k) + 1];
+  for (int k = 0; k < nc; ++k) start[std::size_t(k) + 1] += start[std::size_t(k)];
+  std::vector<int> order(std::size_t(start.back())), fill(start.begin(), start.end() - 1);
+  for (std::size_t i = 0; i < blocks.size(); ++i)
+    if (const int k = target(blocks[i]); k >= 0 && k < nc) order[std::size_t(fill[std::size_t(k)]++)] = int(i);
+  // Per column block: where each row block starts in its first column (rows 3 r, 3 r + 1, 3 r + 2 are adjacent in
+  // the pattern), looked up instead of searched; columns 3 k + 1 and 3 k + 2 hold the same rows when the blocks are
+  // dense (checked: a pattern whose columns differ within the block is searched).
+  std::vector<int> at_row(std::size_t(A.rows() / 3) + 1, -1);
+  for (int k = 0; k < nc; ++k) {
+    if (start[std::size_t(k)] == start[std::size_t(k) + 1]) continue;
+    const int col = 3 * k;
+    for (int p = outer[col]; p < outer[col + 1]; ++p)
+      if (inner[p] % 3 == 0) at_row[std::size_t(inner[p] / 3)] = p - outer[col];
+    for (int j = start[std::size_t(k)]; j < start[std::size_t(k) + 1]; ++j) {
+      const SystemBlock& b = blocks[std::size_t(order[std::size_t(j)])];
+      if (b.row < 0 || 3 * Eigen::Index(b.row) >= A.rows()) continue;
+      const int in_column = at_row[std::size_t(b.row)];
+      if (in_column < 0) continue;  // not for this pattern
+      for (int c = 0; c < 3; ++c) {
+        std::ptrdiff_t at_c = outer[col + c] + in_column;
+        if (at_c >= outer[col + c + 1] || inner[at_c] != 3 * b.row) {
+          at_c = entry(A, 3 * b.row, col + c);
+          if (at_c < 0) continue;
+        }
+        for (int r = 0; r < 3; ++r) val[at_c + r] += b.value(r, c);
       }
-      for (int r = 0; r < 3; ++r) val[at_c + r] += b.value(r, c);
     }
+    for (int p = outer[col]; p < outer[col + 1]; ++p)
+      if (inner[p] % 3 == 0) at_row[std::size_t(inner[p] / 3)] = -1;
   }
 }
 

@@ -575,23 +575,32 @@ class LocalSolve {
   }
   // The rows of the DOFs `dofs` (ascending) of A's columns of those DOFs: A_CC, both triangles, 3 x 3 blocked. The
   // columns' rows are sorted and the map is increasing, so each column's rows come out sorted.
-  static SpMat rows_of(const SpMat& columns, const std::vector<int>& dofs, Eigen::Index n) {
-    std::vector<int> map(std::size_t(n / 3), -1);
-    for (std::size_t i = 0; i < dofs.size(); ++i) map[std::size_t(dofs[i])] = int(i);
+  SpMat rows_of(const SpMat& columns, const std::vector<int>& dofs, Eigen::Index n) {
+    m_row_of.assign(std::size_t(n), -1);  // each scalar row of C's DOFs: its row in A_CC
+    for (std::size_t i = 0; i < dofs.size(); ++i)
+      for (int c = 0; c < 3; ++c) m_row_of[3 * std::size_t(dofs[i]) + std::size_t(c)] = 3 * int(i) + c;
     const Eigen::Index m = columns.cols();
-    std::vector<int> outer(std::size_t(m) + 1, 0), inner;
-    std::vector<double> values;
+    SpMat out(m, m);
+    out.resizeNonZeros(columns.nonZeros());  // at most
+    int* o_outer = out.outerIndexPtr();
+    int* o_inner = out.innerIndexPtr();
+    double* o_val = out.valuePtr();
+    const int* outer = columns.outerIndexPtr();
+    const int* inner = columns.innerIndexPtr();
+    const double* val = columns.valuePtr();
+    int at = 0;
     for (Eigen::Index k = 0; k < m; ++k) {
-      outer[std::size_t(k)] = int(inner.size());
-      for (SpMat::InnerIterator it(columns, k); it; ++it) {
-        const int j = map[std::size_t(it.row() / 3)];
+      o_outer[k] = at;
+      for (int p = outer[k]; p < outer[k + 1]; ++p) {
+        const int j = m_row_of[std::size_t(inner[p])];
         if (j < 0) continue;
-        inner.push_back(3 * j + int(it.row() % 3));
-        values.push_back(it.value());
+        o_inner[at] = j;
+        o_val[at++] = val[p];
       }
     }
-    outer[std::size_t(m)] = int(inner.size());
-    return Eigen::Map<const SpMat>(m, m, Eigen::Index(inner.size()), outer.data(), inner.data(), values.data());
+    o_outer[m] = at;
+    out.resizeNonZeros(at);
+    return out;
   }
 
   std::vector<int> m_dofs;   ///< the region C, ascending
@@ -599,6 +608,7 @@ class LocalSolve {
   CholmodFactor m_factor;    ///< of A restricted to C
   VecX m_rl, m_zl;           ///< work: r, z on C
   VecX m_r1, m_w;            ///< work: r - A z1, G r1 (3 num_dofs)
+  std::vector<int> m_row_of;  ///< work: rows_of's map (3 num_dofs)
 };
 
 // The preconditioner of the solves right after a cut, before the new pattern has a factor of its own. Two parts:
@@ -879,6 +889,7 @@ class PcgSolver final : public LinearSolver {
   // the step keeps the other core busy).
   void start_pending() {
     m_pending = std::make_unique<BackgroundFactorization>();
+    m_pending->A.swap(m_spare_matrix);  // the last refresh's storage: a fresh copy's new pages cost up to 2.7 ms
     m_pending->A = m_A->matrix();
     m_pending->factor = m_back ? std::move(m_back) : std::make_unique<CholmodFactor>();
     m_pending->factor->keep_single(m_single, m_opt.half_precision_entries, m_opt.half_precision_probe);
@@ -905,6 +916,7 @@ class PcgSolver final : public LinearSolver {
     std::unique_ptr<CholmodFactor> factor = std::move(m_pending->factor);
     std::vector<int> fast = std::move(m_pending->fast);
     std::vector<Mat3> rotations = std::move(m_pending->rotations);
+    m_spare_matrix.swap(m_pending->A);
     m_pending.reset();
     if (!ok) {
       m_back = std::move(factor);
@@ -1064,6 +1076,7 @@ class PcgSolver final : public LinearSolver {
   bool m_use_cholesky;
   std::unique_ptr<CholmodFactor> m_front = std::make_unique<CholmodFactor>();  ///< the factor the solves use
   std::unique_ptr<CholmodFactor> m_back;      ///< the spare a background refresh fills (null while it runs)
+  SpMat m_spare_matrix;                       ///< the last adopted refresh's matrix: the next one's storage
   std::unique_ptr<BackgroundFactorization> m_pending;  ///< the background refresh in flight, if any
   std::unique_ptr<CutBridge> m_bridge;        ///< an inherited factor, until this pattern's first one is in place
   bool m_bridging = false;                    ///< the solves are preconditioned through m_bridge

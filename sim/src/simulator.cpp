@@ -66,10 +66,7 @@ class StepSystem final : public SystemOperator {
     SpMat out = m_fem.system_columns(m_m, m_k, m_frame, m_constrained, dofs);
     std::vector<int> local(m_constrained.size(), -1);  // index of each DOF in `dofs`, or -1
     for (std::size_t i = 0; i < dofs.size(); ++i) local[std::size_t(dofs[i])] = int(i);
-    std::vector<SystemBlock> here;  // the contact blocks in these columns, numbered as out's
-    for (const SystemBlock& b : contact)
-      if (local[std::size_t(b.col)] >= 0) here.push_back({b.row, local[std::size_t(b.col)], b.value});
-    add_system_blocks(here, out);
+    add_system_blocks(contact, out, &local);  // the contact blocks in these columns
     return out;
   }
 
@@ -292,9 +289,12 @@ bool Simulator::solve_increment(double dt, const VecX& dv_c, VecX& dv) {
   rhs -= coupling;
   m_profile.assembly = lap(t0);
   // Contact: penalty stiffness and damping in the system matrix, so stiff contact is stable at dt.
-  if (!m_contacts.empty())
+  if (!m_contacts.empty()) {
+    system.contact.reserve(m_contact_blocks);
     contact_system_terms(m_contacts, dt, m_state.v, m_constrained, dv_c, m_fem->system_pattern(m_constrained),
                          system.contact, rhs);
+    m_contact_blocks = system.contact.size();
+  }
   for (int d = 0; d < nd; ++d)
     if (m_constrained[std::size_t(d)]) rhs.segment<3>(3 * d) = dv_c.segment<3>(3 * d);
   m_profile.contact = lap(t0);

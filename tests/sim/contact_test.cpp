@@ -93,6 +93,65 @@ TEST(ContactTerm, ABlockOnAPlaneCarriesItsWeight) {
   EXPECT_EQ(stats.recoveries, 0);
 }
 
+// The contacts' system blocks (add_system_blocks) against a dense sum: into a 3 x 3 blocked matrix, and into the
+// columns of a region of DOFs (what the contact's exact solve takes), each entry receiving its blocks in the list's
+// order; blocks outside the pattern, or whose column is not in the region, are left out.
+TEST(ContactTerm, SystemBlocksAddToTheMatrixAndToARegionsColumns) {
+  const int nd = 12;  // DOFs; block (i, j) is in the pattern when |i - j| <= 2
+  std::vector<Eigen::Triplet<double>> t;
+  for (int i = 0; i < nd; ++i)
+    for (int j = std::max(0, i - 2); j <= std::min(nd - 1, i + 2); ++j)
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) t.emplace_back(3 * i + r, 3 * j + c, 0.01 * (3 * i + r) - 0.003 * (3 * j + c));
+  SpMat A(3 * nd, 3 * nd);
+  A.setFromTriplets(t.begin(), t.end());
+  A.makeCompressed();
+  std::vector<SystemBlock> blocks;
+  std::uint32_t seed = 12345u;
+  const auto next = [&seed] { return (seed = seed * 1664525u + 1013904223u) >> 8; };
+  for (int k = 0; k < 400; ++k) {
+    SystemBlock b;
+    b.row = int(next() % nd);
+    b.col = int(next() % nd);
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) b.value(r, c) = double(next() % 2001) / 1000.0 - 1.0;
+    blocks.push_back(b);
+  }
+  // The truth: the blocks in the pattern summed densely in the list's order.
+  Eigen::MatrixXd want(A);
+  int outside = 0;
+  for (const SystemBlock& b : blocks) {
+    if (std::abs(b.row - b.col) > 2) {
+      ++outside;
+      continue;
+    }
+    for (int c = 0; c < 3; ++c)
+      for (int r = 0; r < 3; ++r) want(3 * b.row + r, 3 * b.col + c) += b.value(r, c);
+  }
+  ASSERT_GT(outside, 50);
+  SpMat whole = A;
+  add_system_blocks(blocks, whole);
+  EXPECT_TRUE(Eigen::MatrixXd(whole) == want);
+  // The columns of the DOFs 1, 4, 5, 9 (and their rows of every DOF).
+  const std::vector<int> region = {1, 4, 5, 9};
+  std::vector<int> local(std::size_t(nd), -1);
+  SpMat cols(3 * nd, 3 * Eigen::Index(region.size()));
+  std::vector<Eigen::Triplet<double>> ct;
+  for (std::size_t i = 0; i < region.size(); ++i) {
+    local[std::size_t(region[i])] = int(i);
+    for (int c = 0; c < 3; ++c)
+      for (SpMat::InnerIterator it(A, 3 * region[i] + c); it; ++it)
+        ct.emplace_back(int(it.row()), 3 * int(i) + c, it.value());
+  }
+  cols.setFromTriplets(ct.begin(), ct.end());
+  cols.makeCompressed();
+  add_system_blocks(blocks, cols, &local);
+  for (std::size_t i = 0; i < region.size(); ++i)
+    for (int c = 0; c < 3; ++c)
+      EXPECT_TRUE(VecX(Eigen::MatrixXd(cols).col(3 * Eigen::Index(i) + c)) == VecX(want.col(3 * region[i] + c)))
+          << "DOF " << region[i] << ", column " << c;
+}
+
 TEST(ContactTerm, APenaltyFarTooStiffForAnExplicitStepIsStable) {
   // k = 1e12 Pa/m: a sample of 6 mm^2 and 0.1 g would need dt < 2 sqrt(m / k) = 8 us explicitly; here dt = 2 ms.
   StabilityStats stats;

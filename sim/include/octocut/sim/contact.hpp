@@ -85,8 +85,11 @@ struct SystemBlock {
 void contact_system_terms(const std::vector<Contact>& contacts, double dt, const std::vector<Vec3>& v,
                           const std::vector<char>& constrained, const VecX& dv_c, const SpMat& pattern,
                           std::vector<SystemBlock>& blocks, VecX& rhs);
-/// A += the blocks, each inside A's pattern (as contact_system_terms gives them for that pattern).
-void add_system_blocks(const std::vector<SystemBlock>& blocks, SpMat& A);
+/// A += the blocks, each inside A's pattern (as contact_system_terms gives them for that pattern); blocks outside it
+/// are left out. With `column_of` (per DOF: the column block of A that holds its columns, or -1), A holds only some
+/// DOFs' columns (SystemOperator::columns) and a block goes to the columns of column_of[col], if any. Each entry
+/// receives its blocks in the list's order.
+void add_system_blocks(const std::vector<SystemBlock>& blocks, SpMat& A, const std::vector<int>* column_of = nullptr);
 /// y += the blocks times x, in the blocks' order (3 num_dofs).
 void add_block_products(const std::vector<SystemBlock>& blocks, const VecX& x, VecX& y);
 

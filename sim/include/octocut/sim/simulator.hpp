@@ -246,6 +246,7 @@ class Simulator {
   int m_history = 0;
   double m_history_dt = 0.0;
   std::vector<Contact> m_contacts;   ///< contacts of the next (or current) step
+  std::size_t m_contact_blocks = 0;  ///< system blocks of the last attempt's contacts (the next one reserves as many)
   std::vector<ContactOutcome> m_outcomes;  ///< what they did in the last step
   ContactEnergy m_contact_energy;          ///< their work and penalty energy change over the last step
 };

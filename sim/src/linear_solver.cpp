@@ -742,9 +742,7 @@ class PcgSolver final : public LinearSolver {
     drop_pending();
     m_pending_in = -1;
     if (m_use_cholesky) {
-      m_front->keep_single(m_single, m_opt.half_precision_entries, m_opt.half_precision_probe);
-      m_front->single_factorization(m_opt.single_precision_factorization, m_opt.tolerance);
-      m_front->thorough_ordering(m_opt.thorough_ordering);
+      configure(*m_front);
       if (m_opt.factor_lag_solves > 0)
         m_front->clear();
       else
@@ -885,6 +883,13 @@ class PcgSolver final : public LinearSolver {
     m_rent = 0.0;
     m_solves_since_factor = 0;
   }
+  // Gives a factor this solver's settings: the single- or half-precision copy, the single-precision
+  // factorisation, the ordering.
+  void configure(CholmodFactor& factor) const {
+    factor.keep_single(m_single, m_opt.half_precision_entries, m_opt.half_precision_probe);
+    factor.single_factorization(m_opt.single_precision_factorization, m_opt.tolerance);
+    factor.thorough_ordering(m_opt.thorough_ordering);
+  }
   // Starts factorising a copy of the current matrix into the back factor on a second thread (BLAS at one thread,
   // the step keeps the other core busy).
   void start_pending() {
@@ -892,9 +897,7 @@ class PcgSolver final : public LinearSolver {
     m_pending->A.swap(m_spare_matrix);  // the last refresh's storage: a fresh copy's new pages cost up to 2.7 ms
     m_pending->A = m_A->matrix();
     m_pending->factor = m_back ? std::move(m_back) : std::make_unique<CholmodFactor>();
-    m_pending->factor->keep_single(m_single, m_opt.half_precision_entries, m_opt.half_precision_probe);
-    m_pending->factor->single_factorization(m_opt.single_precision_factorization, m_opt.tolerance);
-    m_pending->factor->thorough_ordering(m_opt.thorough_ordering);
+    configure(*m_pending->factor);
     m_pending->fast = m_fast_now;
     m_pending->rotations = m_rotations_now;
     CholmodFactor* factor = m_pending->factor.get();

@@ -400,7 +400,9 @@ Entry make_scene_schema() {
       "each value a check: a bare string, boolean or integer (equal), a bare number (equal within rel 1e-9), "
       "`{\"value\": v, \"rel\": r, \"abs\": a}` (|x - v| <= max(a, r |v|); r, a >= 0, default 0) or "
       "`{\"min\": a, \"max\": b}` (a <= x <= b, either bound optional). A pointer the report lacks fails. "
-      "`octocut run --regenerate` rewrites the values.");
+      "`octocut run --regenerate` rewrites the values. A quantity that rounding decides (what a bite grazing an "
+      "earlier hole removes, and in how many pieces) needs a range that holds the spread of runs perturbed within "
+      "the solver's accuracy: `scripts/check_expected_perturbed` checks that.");
   expected.default_doc = "none";
 
   Entry position = optional(vec3("position", std::nullopt, "Eye position, m."));

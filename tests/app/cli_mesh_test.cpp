@@ -162,7 +162,16 @@ TEST_F(CliMeshTest, InvertedMeshIsReorientedWithAWarning) {
   const json j = report();
   EXPECT_NEAR(j["surface"]["rest_volume_m3"].get<double>(), 1e-6, 1e-18);
   bool warned = false;
-  for (const auto& w : j["warnings"]) warned = warned || w.get<std::string>().find("reoriented") != std::string::npos;
+  for (const auto& w : j["warnings"]) {
+    const std::string text = w.get<std::string>();
+    if (text.find("reoriented") == std::string::npos) continue;
+    warned = true;
+    // It names where (the pointer) and the file, once.
+    EXPECT_EQ(text.rfind("/object/surface: ", 0), 0u) << text;
+    const std::size_t named = text.find("inverted.obj");
+    ASSERT_NE(named, std::string::npos) << text;
+    EXPECT_EQ(text.find("inverted.obj", named + 1), std::string::npos) << text;
+  }
   EXPECT_TRUE(warned) << j["warnings"].dump();
 }
 

@@ -94,7 +94,7 @@ SceneObject build_scene_object(const Scene& scene, bool cuttable) {
     try {
       LoadedMesh loaded = load_mesh(o.surface_path, MeshLoadOptions{o.scale, true, true});
       out.surface = std::move(loaded.mesh);
-      for (std::string& w : loaded.warnings) out.warnings.push_back("/object/surface: " + o.surface_path + ": " + w);
+      for (std::string& w : loaded.warnings) out.warnings.push_back("/object/surface: " + w);  // w names the file
     } catch (const MeshError& e) {
       throw SceneError(scene.file + ": /object/surface: " + e.what());
     }

@@ -20,7 +20,7 @@ sim::TriMesh load_tool_file(const Scene& scene, const std::string& path, double 
   try {
     LoadedMesh loaded = load_mesh(path, MeshLoadOptions{scale, true, self_intersections});
     if (warnings)
-      for (const std::string& w : loaded.warnings) warnings->push_back(pointer + ": " + path + ": " + w);
+      for (const std::string& w : loaded.warnings) warnings->push_back(pointer + ": " + w);  // w names the file
     return std::move(loaded.mesh);
   } catch (const MeshError& error) {
     throw SceneError(scene.file + ": " + pointer + ": " + error.what());

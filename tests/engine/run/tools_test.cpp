@@ -202,6 +202,10 @@ TEST_F(ToolFileTest, InvertedBladeIsFlippedWithAWarning) {
   ASSERT_EQ(warnings.size(), 1u);
   EXPECT_EQ(warnings[0].rfind("/tools/0/blade: ", 0), 0u) << warnings[0];
   EXPECT_NE(warnings[0].find("reoriented"), std::string::npos) << warnings[0];
+  // The file is named once.
+  const std::size_t named = warnings[0].find("inverted.ply");
+  ASSERT_NE(named, std::string::npos) << warnings[0];
+  EXPECT_EQ(warnings[0].find("inverted.ply", named + 1), std::string::npos) << warnings[0];
   EXPECT_EQ(validate_tools(scene).at(0).warnings, warnings);
   // A correctly oriented blade gives none.
   save_mesh(m_dir / "ok.ply", sim::cylinder_mesh(2.0, 10.0, 16));

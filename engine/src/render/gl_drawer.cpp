@@ -81,6 +81,7 @@ uniform vec3 u_light_position[4];
 uniform vec3 u_light_color[4];
 uniform int u_has_cut;
 uniform samplerBuffer u_cut;
+uniform float u_opacity;  // 1: opaque; below: glass, its opacity facing the eye (premultiplied output)
 out vec4 o_color;
 void main() {
   vec3 n = normalize(v_normal);
@@ -89,14 +90,23 @@ void main() {
   vec3 base = u_base;
   if (u_has_cut != 0 && texelFetch(u_cut, gl_PrimitiveID).r > 0.0) base = u_cut_color;
   vec3 color = u_ambient * base;
+  vec3 shine = vec3(0.0);
   for (int i = 0; i < u_light_count; ++i) {
     vec3 l = normalize(u_light_position[i] - v_world);
     vec3 h = normalize(l + v);
     float diffuse = max(dot(n, l), 0.0);
     float specular = diffuse > 0.0 ? pow(max(dot(n, h), 0.0), u_shininess) : 0.0;
     color += u_light_color[i] * (diffuse * base + u_specular * specular * vec3(1.0));
+    shine += u_light_color[i] * (u_specular * specular);
   }
-  o_color = vec4(clamp(color, 0.0, 1.0), 1.0);
+  if (u_opacity >= 1.0) {
+    o_color = vec4(clamp(color, 0.0, 1.0), 1.0);
+    return;
+  }
+  // Glass: the lit body colour covers a fraction a of what lies behind, a growing towards 1 at grazing angles
+  // (Schlick's Fresnel term); the highlights are added on top.
+  float a = mix(u_opacity, 1.0, pow(1.0 - abs(dot(n, v)), 5.0));
+  o_color = vec4(clamp((color - shine) * a + shine, 0.0, 1.0), a);
 }
 )";
 
@@ -238,6 +248,7 @@ Shading shading_of(MaterialKind kind) {
   switch (kind) {
     case MaterialKind::metal: return {{0.62f, 0.64f, 0.68f}, 0.9f, 80.0f};
     case MaterialKind::bone: return {{0.88f, 0.84f, 0.72f}, 0.08f, 8.0f};
+    case MaterialKind::glass: return {{0.55f, 0.62f, 0.70f}, 1.0f, 120.0f};
     case MaterialKind::tissue: break;
   }
   return {{0.86f, 0.58f, 0.56f}, 0.25f, 24.0f};
@@ -245,6 +256,18 @@ Shading shading_of(MaterialKind kind) {
 
 const Eigen::Vector3f kCutColor(0.78f, 0.12f, 0.10f);  ///< fresh-tissue red, RGB
 constexpr float kAmbient = 0.15f;
+constexpr float kGlassOpacity = 0.12f;  ///< the fraction of the view that glass facing the eye covers
+
+/// Which of a mesh's faces a draw keeps.
+enum class Faces {
+  as_mesh,  ///< the front faces of a closed mesh (RenderMesh::cull_back_faces), all faces of an open one
+  front,    ///< those facing the eye
+  back,     ///< those facing away (the far side of a glass body, drawn before its near side)
+};
+
+/// Whether a renderer's still layer may hold the mesh: a still, opaque mesh (glass is blended over what the layer
+/// holds and what is drawn after it, so it is drawn every frame).
+bool layer_may_hold(const RenderMesh& mesh) { return mesh.still && mesh.material != MaterialKind::glass; }
 
 }  // namespace
 
@@ -331,6 +354,7 @@ struct GlDrawer::Impl {
         glUniform3fv(uniform(program, ("u_light_color" + index).c_str()), 1, lights[i].color.data());
       }
       glUniform1i(uniform(program, "u_cut"), 0);
+      glUniform1f(uniform(program, "u_opacity"), 1.0f);
     }
     // Faces are pushed back a little so that wireframe lines lying on them win the depth test.
     glEnable(GL_POLYGON_OFFSET_FILL);
@@ -348,7 +372,8 @@ struct GlDrawer::Impl {
       glBindFramebuffer(GL_FRAMEBUFFER, m_msaa_fbo);
     }
     for (const RenderMesh& mesh : scene.meshes)
-      if (!(layered && mesh.still)) draw_mesh(mesh);
+      if (!(layered && layer_may_hold(mesh)) && mesh.material != MaterialKind::glass) draw_mesh(mesh);
+    draw_glass(scene);
     glDisable(GL_POLYGON_OFFSET_FILL);
     glDisable(GL_CULL_FACE);
 
@@ -497,7 +522,25 @@ struct GlDrawer::Impl {
     glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, sizeof(Eigen::Vector3f), nullptr);
   }
 
-  void draw_mesh(const RenderMesh& mesh) {
+  /// The glass meshes, over everything opaque: blended (premultiplied), without writing depth, each one's far side
+  /// first and then its near side, so that both show.
+  void draw_glass(const RenderScene& scene) {
+    bool any = false;
+    for (const RenderMesh& mesh : scene.meshes) any = any || mesh.material == MaterialKind::glass;
+    if (!any) return;
+    glEnable(GL_BLEND);
+    glBlendFunc(GL_ONE, GL_ONE_MINUS_SRC_ALPHA);
+    glDepthMask(GL_FALSE);
+    for (const RenderMesh& mesh : scene.meshes) {
+      if (mesh.material != MaterialKind::glass) continue;
+      if (mesh.cull_back_faces) draw_mesh(mesh, Faces::back);
+      draw_mesh(mesh, Faces::front);
+    }
+    glDepthMask(GL_TRUE);
+    glDisable(GL_BLEND);
+  }
+
+  void draw_mesh(const RenderMesh& mesh, Faces faces = Faces::as_mesh) {
     if (mesh.triangles.empty() || mesh.positions.empty()) return;
     // Validate before GL reads anything out of bounds.
     const std::size_t nv = mesh.positions.size();
@@ -513,9 +556,12 @@ struct GlDrawer::Impl {
 
     // Material and transform.
     const Shading shading = shading_of(mesh.material);
-    // Tissue and bone are lit per vertex (dense, dull surfaces); metal keeps per-fragment highlights.
-    const GLuint program = mesh.material == MaterialKind::metal ? m_mesh_program : m_tissue_program;
+    // Tissue and bone are lit per vertex (dense, dull surfaces); metal and glass keep per-fragment highlights.
+    const bool per_fragment = mesh.material == MaterialKind::metal || mesh.material == MaterialKind::glass;
+    const GLuint program = per_fragment ? m_mesh_program : m_tissue_program;
     glUseProgram(program);
+    if (per_fragment)
+      glUniform1f(uniform(program, "u_opacity"), mesh.material == MaterialKind::glass ? kGlassOpacity : 1.0f);
     glUniform3fv(uniform(program, "u_base"), 1, shading.base.data());
     glUniform1f(uniform(program, "u_specular"), shading.specular);
     glUniform1f(uniform(program, "u_shininess"), shading.shininess);
@@ -535,9 +581,12 @@ struct GlDrawer::Impl {
     // Closed meshes hide their back faces: they are dropped here already, on the CPU, so that llvmpipe neither shades
     // the vertices only they use nor sets them up (its vertex stage runs on one thread). A triangle is kept when the
     // eye is in front of its plane, with a margin that keeps edge-on triangles for GL's own culling to decide.
+    // The far side of a glass body (Faces::back) keeps the others instead, and GL culls its front faces.
     const std::vector<std::array<std::int32_t, 3>>* triangles = &mesh.triangles;
     const std::vector<std::uint8_t>* cut = &mesh.cut;
-    if (mesh.cull_back_faces) {
+    const bool cull = faces == Faces::as_mesh ? mesh.cull_back_faces : true;
+    const bool keep_back = faces == Faces::back;
+    if (cull) {
       const Eigen::Vector3f eye = (mesh.model.inverse() * m_eye.homogeneous()).head<3>();
       m_front_triangles.clear();
       m_front_cut.clear();
@@ -547,7 +596,8 @@ struct GlDrawer::Impl {
         const Eigen::Vector3f n =
             (mesh.positions[std::size_t(t[1])] - a).cross(mesh.positions[std::size_t(t[2])] - a);
         const Eigen::Vector3f to_face = a - eye;
-        if (n.dot(to_face) > 1e-4f * n.norm() * to_face.norm()) continue;
+        const float margin = 1e-4f * n.norm() * to_face.norm();
+        if (keep_back ? n.dot(to_face) < -margin : n.dot(to_face) > margin) continue;
         m_front_triangles.push_back(t);
         if (!mesh.cut.empty()) m_front_cut.push_back(mesh.cut[f]);
       }
@@ -570,11 +620,13 @@ struct GlDrawer::Impl {
       glTexBuffer(GL_TEXTURE_BUFFER, GL_R8, m_cut_buffer);
     }
     // Closed meshes hide their back faces anyway: culling them halves llvmpipe's rasterisation work.
-    if (mesh.cull_back_faces)
+    if (cull)
       glEnable(GL_CULL_FACE);
     else
       glDisable(GL_CULL_FACE);
+    glCullFace(keep_back ? GL_FRONT : GL_BACK);
     glDrawElements(GL_TRIANGLES, GLsizei(3 * triangles->size()), GL_UNSIGNED_INT, nullptr);
+    glCullFace(GL_BACK);
   }
 
   static bool same_mesh(const RenderMesh& a, const RenderMesh& b) {
@@ -591,7 +643,7 @@ struct GlDrawer::Impl {
                            const std::vector<RenderLight>& lights, const Rect& region) {
     std::vector<const RenderMesh*> still;
     for (const RenderMesh& mesh : scene.meshes)
-      if (mesh.still) still.push_back(&mesh);
+      if (layer_may_hold(mesh)) still.push_back(&mesh);
     if (still.empty()) return false;
     const auto same_light = [](const RenderLight& a, const RenderLight& b) {
       return a.position == b.position && a.color == b.color;

@@ -22,7 +22,10 @@ Eigen::Matrix4d prop_pose(const RenderProp& prop, double t) {
 
 RenderMesh prop_mesh(const sim::TriMesh& mesh, const std::string& material) {
   RenderMesh out;
-  out.material = material == "metal" ? MaterialKind::metal : material == "tissue" ? MaterialKind::tissue : MaterialKind::bone;
+  out.material = material == "metal"    ? MaterialKind::metal
+                 : material == "tissue" ? MaterialKind::tissue
+                 : material == "glass"  ? MaterialKind::glass
+                                        : MaterialKind::bone;
   out.positions.reserve(mesh.vertices.size());
   for (const sim::Vec3& p : mesh.vertices) out.positions.push_back(to_float(p));
   out.triangles = mesh.triangles;

@@ -239,7 +239,7 @@ sim::TriMesh sphere_mesh(double radius, int segments, int rings) {
 }  // namespace
 
 void World::Impl::load_body_meshes() {
-  // What each rigid body looks like: its shape in the body frame; glass is drawn as metal (no glass shading yet).
+  // What each rigid body looks like: its shape in the body frame, shaded as metal, bone or glass.
   for (std::size_t i = 0; i < scene.rigid_bodies.size(); ++i) {
     const RigidBodySettings& b = scene.rigid_bodies[i];
     body_meshes.emplace_back();
@@ -253,7 +253,7 @@ void World::Impl::load_body_meshes() {
       mesh = sim::box_face_grids({-half, half}, 1);
     }
     if (sh.kind == "mesh") mesh = load_mesh(sh.mesh_path, MeshLoadOptions{sh.scale, false, false}).mesh;
-    body_meshes.back() = prop_mesh(mesh, b.render == "bone" ? "bone" : "metal");
+    body_meshes.back() = prop_mesh(mesh, b.render);
   }
 }
 

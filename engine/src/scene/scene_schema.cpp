@@ -187,7 +187,8 @@ Entry make_rigid_bodies() {
                     "position linear, rotation spherical-linear, held before the first and after the last."),
        std::move(friction),
        choice("render", {"metal", "bone", "glass", "none"}, "metal",
-              "How the body is drawn (its shape, at its pose); `glass` is shaded as metal for now; `none`: not drawn.")},
+              "How the body is drawn (its shape, at its pose); `glass`: clear, what lies behind shows through, with "
+              "highlights and a rim that grows opaque at grazing angles; `none`: not drawn.")},
       "Rigid bodies (Bullet) that collide with the tissue.");
 }
 

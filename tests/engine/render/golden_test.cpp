@@ -283,6 +283,44 @@ TEST_F(GoldenTest, TissueWithCutFacesAMetalToolAndBone) {
   EXPECT_NE(metal, (std::array<int, 3>{51, 51, 51}));
 }
 
+// A glass cylinder lying in front of a tissue sphere (as the glass press's glass lies on the cube): the tissue shows
+// through it with its colour, where a metal cylinder of the same shape hides it; where only the background lies
+// behind, the glass is faint. Checked against the same scene without the cylinder and with it in metal.
+TEST_F(GoldenTest, GlassShowsWhatLiesBehindIt) {
+  RenderScene scene = base_scene();
+  scene.meshes.push_back(sphere({0.0f, 0.0f, -0.3f}, 1.0f, 48, 24, MaterialKind::tissue));
+  RenderMesh glass = cylinder(0.35f, -1.2f, 1.2f, 48);
+  glass.material = MaterialKind::glass;
+  const float quarter_turn = 0.5f * float(std::numbers::pi);  // the cylinder's axis along x
+  const Eigen::Affine3f pose =
+      Eigen::Translation3f(0.0f, -1.5f, 0.0f) * Eigen::AngleAxisf(quarter_turn, Eigen::Vector3f::UnitY());
+  glass.model = pose.matrix();
+  glass.still = true;  // never kept in the still layer: it is blended over what is drawn after the layer
+  RenderScene bare = scene, metal = scene;
+  scene.meshes.push_back(glass);
+  glass.material = MaterialKind::metal;
+  metal.meshes.push_back(glass);
+  const Image image = render_and_compare("glass", scene);
+  const Image without = s_renderer->render(bare), in_metal = s_renderer->render(metal);
+  // Two points inside the cylinder, below its axis (off the headlight's highlight): behind the first lies the
+  // sphere, behind the second the background.
+  const Eigen::Vector3d over_tissue(0.0, -1.5, -0.2), over_background(1.0, -1.5, -0.2);
+  const auto tissue = pixel_at(image, scene.camera, over_tissue);
+  const auto tissue_bare = pixel_at(without, scene.camera, over_tissue);
+  const auto tissue_metal = pixel_at(in_metal, scene.camera, over_tissue);
+  ASSERT_GT(tissue_bare[0] - tissue_bare[1], 20) << "the sphere is pink there";
+  EXPECT_NE(tissue, tissue_bare) << "the glass is drawn";
+  EXPECT_GE(tissue[0] - tissue[1], (tissue_bare[0] - tissue_bare[1]) / 2) << "the tissue shows through";
+  EXPECT_LE(std::abs(tissue_metal[0] - tissue_metal[1]), 12) << "metal hides it";
+  const auto background = pixel_at(image, scene.camera, over_background);
+  EXPECT_EQ(pixel_at(without, scene.camera, over_background), (std::array<int, 3>{51, 51, 51}));
+  EXPECT_NE(background, (std::array<int, 3>{51, 51, 51})) << "the glass is drawn";
+  for (int c = 0; c < 3; ++c) EXPECT_LE(std::abs(background[std::size_t(c)] - 51), 45) << "and faint";
+  EXPECT_GT(background[2], background[0]) << "with a blue tint";
+  const auto background_metal = pixel_at(in_metal, scene.camera, over_background);
+  EXPECT_GT(background_metal[1] - 51, 2 * (background[1] - 51)) << "metal is opaque";
+}
+
 TEST_F(GoldenTest, StillMeshesKeptBetweenFramesLookAsIfRedrawn) {
   // A still bone and a still box behind a moving tool that dips into the bone: each frame must equal the same scene
   // with nothing marked still (every mesh drawn afresh), also after the camera, a light, the background and the

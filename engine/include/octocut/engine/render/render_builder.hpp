@@ -31,7 +31,7 @@ RenderMesh tissue_mesh(const sim::ObjectModel& model, const EmbeddedSurface& sur
 /// keyframes (position linear, rotation slerp, held at both ends); the identity without keyframes.
 Eigen::Matrix4d prop_pose(const RenderProp& prop, double t);
 
-/// A prop's mesh in its own frame (m), shaded as `material` ("bone", "metal" or "tissue").
+/// A prop's or a rigid body's mesh in its own frame (m), shaded as `material` ("bone", "metal", "tissue" or "glass").
 RenderMesh prop_mesh(const sim::TriMesh& mesh, const std::string& material);
 
 /// The camera of the scene settings for an object with rest bounds `bounds` (m): a missing target is the centre of

@@ -16,6 +16,10 @@ enum class MaterialKind {
   tissue,  ///< soft tissue: pink Blinn-Phong, cut faces tinted fresh-tissue red
   metal,   ///< instruments: grey, strong narrow highlight
   bone,    ///< the knee context: ivory, dull
+  /// clear glass (a rigid body's `"render": "glass"`): what lies behind shows through, faintly blue, with highlights
+  /// and a rim that grows opaque at grazing angles (Fresnel); drawn after the opaque meshes, blended, back faces
+  /// first, never kept in a renderer's still layer
+  glass,
 };
 
 /// One triangle mesh to draw. Positions and normals are in the mesh's model space; `model` maps them to world space.

@@ -189,7 +189,10 @@ TEST_F(MeshIoTest, AFileIsReadOnlyAsTheFormatItsExtensionNames) {
 // An OFF header that declares more vertices or faces than the file can hold is a clear error before any importer
 // allocates them (the mesh fuzzer's input declared 4.6e37 vertices in 89 bytes).
 TEST_F(MeshIoTest, OffCountsBeyondTheFileSizeAreRefusedBeforeImport) {
-  for (const std::string header : {"OFF\n455555555555 4 5\n", "OFF 4 99999999 0\n", "# c\nOFF\n4555555555555555555555555 1 0\n"}) {
+  // The last two: a count glued to text, and a count before a word that is none (the mesh fuzzer's input).
+  for (const std::string header :
+       {"OFF\n455555555555 4 5\n", "OFF 4 99999999 0\n", "# c\nOFF\n4555555555555555555555555 1 0\n",
+        "OFF\n5555555555x 4 0\n", "OFF\n55555555555555555554 4Stexturectype I\n"}) {
     const fs::path file = write("big.off", header + "0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n");
     const std::string message = load_error(file);
     EXPECT_TRUE(has(message, file.string() + ": malformed mesh: the OFF header declares")) << message;

@@ -7,7 +7,9 @@
 
 namespace octocut::sim {
 
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+// Not under ThreadSanitizer: the clones' resolver runs while the dynamic loader relocates, before TSan's run time is
+// set up, and its instrumented code crashes there.
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__)) && !defined(__SANITIZE_THREAD__)
 __attribute__((target_clones("avx512f", "avx2", "default")))
 #endif
 void apply_stiffness24(const double* __restrict K, const double* __restrict v, double* __restrict out) {

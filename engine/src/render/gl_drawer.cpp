@@ -533,8 +533,12 @@ struct GlDrawer::Impl {
     glDepthMask(GL_FALSE);
     for (const RenderMesh& mesh : scene.meshes) {
       if (mesh.material != MaterialKind::glass) continue;
-      if (mesh.cull_back_faces) draw_mesh(mesh, Faces::back);
-      draw_mesh(mesh, Faces::front);
+      if (mesh.cull_back_faces) {
+        draw_mesh(mesh, Faces::back);
+        draw_mesh(mesh, Faces::front);
+      } else {
+        draw_mesh(mesh);  // an open mesh: both sides in one pass
+      }
     }
     glDepthMask(GL_TRUE);
     glDisable(GL_BLEND);

@@ -8,11 +8,9 @@
 // gravity impulse dt M g), and the same for octocut's `pcg` with its lagged factor (a fresh factor: the best case a
 // step sees), with the factorisation's time. The V-cycle: Chebyshev smoothing of degree K (2) on the Jacobi-scaled
 // operator before and after, trilinear prolongation P, Galerkin coarse operators P^T A P, a sparse Cholesky on the
-// coarsest level (<= 5^3 nodes). Threads: the products run on TBB's threads (the machine's cores).
+// coarsest level (<= 5^3 nodes). Threads: the products run on an octocut Executor over the machine's cores.
 //
 // Usage: bench_multigrid [--degree K] [--ratio R] [n ...]   (n: leaves per side, even; default 8 12 16 20 24 32)
-#include <tbb/parallel_for.h>
-
 #include <Eigen/SparseCholesky>
 #include <algorithm>
 #include <chrono>
@@ -41,11 +39,17 @@ double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
+/// The machine's cores, for the products here and for octocut's solver (as the simulator gives its solver).
+octocut::sim::Executor& cores() {
+  static octocut::sim::Executor executor(0);
+  return executor;
+}
+
 /// y = A x on the cores (A row-major).
 void product(const RowMat& A, const VecX& x, VecX& y) {
   y.resize(A.rows());
-  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, A.rows(), 2048), [&](const auto& r) {
-    for (Eigen::Index i = r.begin(); i < r.end(); ++i) {
+  cores().parallel_for(int(A.rows()), 2048, [&](int begin, int end) {
+    for (int i = begin; i < end; ++i) {
       double s = 0.0;
       for (RowMat::InnerIterator it(A, i); it; ++it) s += it.value() * x[it.index()];
       y[i] = s;
@@ -129,7 +133,7 @@ struct Level {
   VecX inverse_diagonal;
   double lambda_max = 1.0;  // of D^-1 A, estimated
   RowMat P, R;              // to / from the next coarser level
-  VecX r, x, tmp, z;        // work vectors
+  VecX r, tmp;              // work vectors
 };
 
 class Multigrid {
@@ -150,9 +154,10 @@ class Multigrid {
         break;
       }
       const SpMat P = prolongation(Grid(leaves), Grid(leaves / 2));
+      const SpMat R = P.transpose();
       level.P = P;
-      level.R = SpMat(P.transpose());
-      current = SpMat(SpMat(P.transpose()) * current) * P;
+      level.R = R;
+      current = SpMat(R * current) * P;
       m_levels.push_back(std::move(level));
       leaves /= 2;
     }
@@ -287,8 +292,7 @@ void run(int n) {
   options.tolerance = 1e-4;
   options.thorough_ordering = true;  // as the simulator asks for the model it starts with
   const std::unique_ptr<octocut::sim::LinearSolver> solver = octocut::sim::make_linear_solver("pcg", options);
-  octocut::sim::Executor executor(0);  // the machine's cores, as the simulator gives its solver
-  solver->set_executor(&executor);
+  solver->set_executor(&cores());
   const Clock::time_point f0 = Clock::now();
   solver->analyze_pattern(A);
   solver->factorize(A);

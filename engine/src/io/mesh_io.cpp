@@ -531,11 +531,10 @@ void check_off_counts(const fs::path& path, const std::string& file) {
     const char* b = words[k].data();
     const char* e = b + words[k].size();
     std::uint64_t n = 0;
-    const auto [ptr, ec] = std::from_chars(b, e, n);
+    const std::errc ec = std::from_chars(b, e, n).ec;
     // A word's leading digits are what assimp's reader takes as the count ("4Stexture" reads as 4), so they are
     // what is checked; a word without any ends the counts (assimp reports the malformed header), and the counts
     // before it are still checked (found by the mesh fuzzer: a 20-digit vertex count before such a word).
-    (void)ptr;
     if (ec == std::errc::result_out_of_range)
       count = 1e30L;
     else if (ec == std::errc())

@@ -54,12 +54,16 @@ class StepSystem final : public SystemOperator {
   }
   const SpMat& matrix() override {
     if (!m_assembled) {
-      VecX coupling;  // the step took it from FemSystem::system_coupling
-      m_fem.assemble_system(m_m, m_k, m_frame, m_constrained, VecX::Zero(rows()), m_storage, coupling);
-      add_system_blocks(contact, m_storage);
+      assemble(m_storage);
       m_assembled = true;
     }
     return m_storage;
+  }
+  void assemble_into(SpMat& out) override {
+    if (m_assembled)
+      out = m_storage;
+    else
+      assemble(out);
   }
   const SpMat& pattern() override { return m_fem.system_pattern(m_constrained); }
   SpMat columns(const std::vector<int>& dofs) override {
@@ -71,6 +75,12 @@ class StepSystem final : public SystemOperator {
   }
 
  private:
+  void assemble(SpMat& out) {
+    VecX coupling;  // the step took it from FemSystem::system_coupling
+    m_fem.assemble_system(m_m, m_k, m_frame, m_constrained, VecX::Zero(rows()), out, coupling);
+    add_system_blocks(contact, out);
+  }
+
   FemSystem& m_fem;
   const ElementFrame& m_frame;
   double m_m, m_k;  // the mass's and the stiffness's coefficients

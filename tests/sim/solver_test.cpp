@@ -358,6 +358,68 @@ TEST(LinearSolver, PcgBackgroundRefreshIsAccurateAndDeterministic) {
   for (std::size_t k = 0; k < a.x.size(); ++k) EXPECT_TRUE(a.x[k] == b.x[k]) << "solve " << k;
 }
 
+// An operator that counts how its entries are asked for: matrix() (the step's own storage) or assemble_into (a
+// background refresh's copy, which takes them without filling or copying the step's storage).
+class CountingOperator final : public SystemOperator {
+ public:
+  explicit CountingOperator(const SpMat& A) : m_A(A) {}
+  [[nodiscard]] Eigen::Index rows() const override { return m_A.rows(); }
+  [[nodiscard]] Eigen::Index nonzeros() const override { return m_A.nonZeros(); }
+  void product(const VecX& x, VecX& y) override { y = m_A * x; }
+  const SpMat& matrix() override {
+    ++matrix_calls;
+    return m_A;
+  }
+  void assemble_into(SpMat& out) override {
+    ++assemble_calls;
+    out = m_A;
+  }
+  int matrix_calls = 0, assemble_calls = 0;
+
+ private:
+  const SpMat& m_A;
+};
+
+// The background refreshes take their matrix through assemble_into, one per refresh, and never through matrix():
+// only the first solve's inline factorisation reads it. Every solve meets the tolerance by the residual recomputed
+// here, and the refreshes' factors are those of their matrices (the iterations stay far below never refreshing).
+TEST(LinearSolver, PcgBackgroundRefreshAssemblesIntoItsOwnMatrix) {
+  const SpMat A0 = laplacian(10, 0.05);
+  LinearSolverOptions o;
+  o.tolerance = 1e-8;
+  o.max_iterations = 1000;
+  o.factor_flop_advantage = 1.5;
+  o.factor_lag_solves = 3;
+  auto s = make_linear_solver("pcg", o);
+  s->analyze_pattern(A0);
+  int matrix_calls = 0, assemble_calls = 0, background = 0, iterations = 0;
+  for (int k = 0; k < 60; ++k) {
+    SpMat A = A0;
+    for (int i = 0; i < A.rows() / 2; ++i) A.coeffRef(i, i) += 0.2 * k * (1.0 + (i % 7));
+    CountingOperator op(A);
+    ASSERT_TRUE(s->factorize_operator(op));
+    const VecX b = VecX::LinSpaced(A.rows(), -1.0, 2.0);
+    VecX x = VecX::Zero(A.rows());
+    const SolveInfo info = s->solve(b, x);
+    EXPECT_TRUE(info.ok);
+    EXPECT_LT((A * x - b).norm(), 1e-7 * b.norm()) << "solve " << k;
+    if (k > 0) matrix_calls += op.matrix_calls;
+    assemble_calls += op.assemble_calls;
+    background += info.background ? 1 : 0;
+    iterations += info.iterations;
+  }
+  EXPECT_EQ(matrix_calls, 0);  // after the first solve's inline factor
+  EXPECT_GT(background, 2);
+  EXPECT_GE(assemble_calls, background);  // each adopted refresh was assembled (a last one may still be running)
+  EXPECT_LE(assemble_calls, background + 1);
+  const DriftRun never = [&] {
+    LinearSolverOptions n = o;
+    n.factor_flop_advantage = 1e-12;
+    return drift_run(A0, n);
+  }();
+  EXPECT_LT(iterations, never.iterations / 2);
+}
+
 // PCG's products with A run on the executor's threads (set_executor) in row ranges: the iterates are bit-identical
 // with no executor, one thread and two, and the solution meets the tolerance by the residual Eigen recomputes. A
 // system of 8,000 unknowns, so that the products are split, and the Jacobi preconditioner, so that there are many.

@@ -36,6 +36,10 @@ class SystemOperator {
   virtual void product(const VecX& x, VecX& y) = 0;
   /// A with both triangles stored, assembled on the first call. The reference stays valid while the operator does.
   virtual const SpMat& matrix() = 0;
+  /// Writes A with both triangles into `out`, reusing out's storage where it is large enough (a background
+  /// factorisation's own copy). By default a copy of matrix(); the FEM system assembles straight into `out`, so that
+  /// its own storage is neither filled nor copied.
+  virtual void assemble_into(SpMat& out) { out = matrix(); }
   /// A's sparsity pattern (the values are not to be read): which DOFs A couples, without assembling it.
   virtual const SpMat& pattern() { return matrix(); }
   /// A's columns of the DOFs `dofs` (ascending; columns 3 i, 3 i + 1, 3 i + 2 are those of dofs[i]), with all their

@@ -545,6 +545,15 @@ class LocalSolve {
     return false;
   }
   [[nodiscard]] bool empty() const { return m_dofs.empty(); }
+  /// Whether any of `dofs` (ascending) lies in the region.
+  [[nodiscard]] bool meets(const std::vector<int>& dofs) const {
+    std::size_t i = 0, j = 0;
+    while (i < m_dofs.size() && j < dofs.size()) {
+      if (m_dofs[i] == dofs[j]) return true;
+      (m_dofs[i] < dofs[j] ? i : j)++;
+    }
+    return false;
+  }
   /// z = the combination applied to r (see the class comment); global(r, w) sets w = G r.
   template <class Global>
   void apply(const VecX& r, VecX& z, Global&& global) {
@@ -639,12 +648,31 @@ class CutBridge {
       : m_factor(std::move(factor)), m_transfer(std::move(transfer)) {}
   /// The old revision's factor (its operation counts price the new pattern's first factor until that is analysed).
   [[nodiscard]] const CholmodFactor& old_factor() const { return *m_factor; }
-  /// Prepares for A (3 x 3 blocked, new DOFs as T's rows). False when it cannot: then nothing uses it.
+  /// Prepares for A (3 x 3 blocked, new DOFs as T's rows), unless given its local solve already (set_local).
+  /// False when it cannot: then nothing uses it.
   bool build(SystemOperator& A) {
     const Eigen::Index nb = A.rows() / 3;
     if (A.rows() % 3 != 0 || m_transfer.rows() != nb || !m_factor) return false;
-    return m_local.build(A, cut_region(A));  // false without its factor: G alone would miss the cut's new DOFs
+    if (m_local_ready) return true;
+    // False without its factor: G alone would miss the cut's new DOFs.
+    return m_local->build(A, cut_region(m_transfer, A.pattern()));
   }
+  /// The exact solve on the cut's region, built beforehand (from a system of the same pattern: prepare_bridge).
+  void set_local(std::unique_ptr<LocalSolve> local) {
+    m_local = std::move(local);
+    m_local_ready = !m_local->empty();
+  }
+  /// Forgets a local solve built beforehand when any of the DOFs `fast` (ascending: those the current system's
+  /// contact blocks reach) lies in its region: its columns, taken without contacts, would then differ from this
+  /// system's, so build() takes them from this system. Otherwise they are the same, bit for bit.
+  void drop_local_if_it_meets(const std::vector<int>& fast) {
+    if (!m_local_ready || !m_local->meets(fast)) return;
+    m_local = std::make_unique<LocalSolve>();
+    m_local_ready = false;
+  }
+  /// The DOFs of the cut's region for transfer T (new x old DOFs) and the new system's pattern (see the class
+  /// comment), ascending.
+  static std::vector<int> cut_region(const SpMat& transfer, const SpMat& pattern);
   /// z = the bridge applied to r for the system matrix it was built for (see the class comment); F_old's
   /// triangular solves in single precision if asked, on the executor's threads; G warped by `warp` (Q G Q^T, new
   /// numbering) unless it is empty.
@@ -658,10 +686,10 @@ class CutBridge {
       apply_global(m_warped, w, single, executor);
       warp_in_place(warp, w);
     };
-    if (m_local.empty())
+    if (m_local->empty())
       global(r, z);
     else
-      m_local.apply(r, z, global);
+      m_local->apply(r, z, global);
   }
 
  private:
@@ -678,40 +706,43 @@ class CutBridge {
       for (SpMat::InnerIterator it(m_transfer, j); it; ++it)
         w.segment<3>(3 * it.row()) += it.value() * m_zc.segment<3>(3 * j);
   }
-  // The DOFs of the cut's region (see the class comment), ascending.
-  std::vector<int> cut_region(SystemOperator& A) const {
-    const Eigen::Index nb = A.rows() / 3;
-    std::vector<int> reached(std::size_t(m_transfer.cols()), 0);  // new DOFs each old DOF feeds
-    std::vector<int> source(std::size_t(nb), -1);                  // the old DOF a copied new DOF takes, else -1
-    std::vector<char> copied(std::size_t(nb), 0);
-    for (Eigen::Index j = 0; j < m_transfer.cols(); ++j)
-      for (SpMat::InnerIterator it(m_transfer, j); it; ++it) {
-        ++reached[std::size_t(j)];
-        const auto d = std::size_t(it.row());
-        copied[d] = source[d] == -1 && it.value() == 1.0;
-        source[d] = source[d] == -1 ? int(j) : -2;  // -2: reads several old DOFs
-      }
-    std::vector<char> in(std::size_t(nb), 0);
-    for (Eigen::Index d = 0; d < nb; ++d) {
-      const int j = source[std::size_t(d)];
-      in[std::size_t(d)] = !(copied[std::size_t(d)] && j >= 0 && reached[std::size_t(j)] == 1);
-    }
-    std::vector<char> grown = in;  // and the DOFs coupled to those in A (its pattern)
-    const SpMat& pattern = A.pattern();
-    for (Eigen::Index k = 0; k < nb; ++k)
-      if (in[std::size_t(k)])
-        for (SpMat::InnerIterator it(pattern, 3 * k); it; ++it) grown[std::size_t(it.row() / 3)] = 1;
-    std::vector<int> out;
-    for (Eigen::Index k = 0; k < nb; ++k)
-      if (grown[std::size_t(k)]) out.push_back(int(k));
-    return out;
-  }
   std::unique_ptr<CholmodFactor> m_factor;  ///< the old revision's lagged factor (3 old num_dofs)
   SpMat m_transfer;                         ///< new x old DOFs (transfer_matrix)
-  LocalSolve m_local;                       ///< the exact solve on the cut's region (at the bridge's first matrix)
+  /// The exact solve on the cut's region (at the bridge's first matrix, or at the state the cut carried over).
+  std::unique_ptr<LocalSolve> m_local = std::make_unique<LocalSolve>();
+  bool m_local_ready = false;  ///< m_local was given (set_local), not to be built
   VecX m_rc, m_zc;                          ///< work: T^T r, F_old^-1 T^T r (3 old num_dofs)
   VecX m_warped;                            ///< work: Q^T r (3 num_dofs)
 };
+
+// The cut's region: every new DOF that is not a plain copy of one old DOF which no other new DOF copies (refined
+// DOFs and both halves of a split one), grown by the DOFs coupled to them in A's pattern.
+std::vector<int> CutBridge::cut_region(const SpMat& transfer, const SpMat& pattern) {
+  const Eigen::Index nb = transfer.rows();
+  std::vector<int> reached(std::size_t(transfer.cols()), 0);  // new DOFs each old DOF feeds
+  std::vector<int> source(std::size_t(nb), -1);                // the old DOF a copied new DOF takes, else -1
+  std::vector<char> copied(std::size_t(nb), 0);
+  for (Eigen::Index j = 0; j < transfer.cols(); ++j)
+    for (SpMat::InnerIterator it(transfer, j); it; ++it) {
+      ++reached[std::size_t(j)];
+      const auto d = std::size_t(it.row());
+      copied[d] = source[d] == -1 && it.value() == 1.0;
+      source[d] = source[d] == -1 ? int(j) : -2;  // -2: reads several old DOFs
+    }
+  std::vector<char> in(std::size_t(nb), 0);
+  for (Eigen::Index d = 0; d < nb; ++d) {
+    const int j = source[std::size_t(d)];
+    in[std::size_t(d)] = !(copied[std::size_t(d)] && j >= 0 && reached[std::size_t(j)] == 1);
+  }
+  std::vector<char> grown = in;  // and the DOFs coupled to those in A (its pattern)
+  for (Eigen::Index k = 0; k < nb; ++k)
+    if (in[std::size_t(k)])
+      for (SpMat::InnerIterator it(pattern, 3 * k); it; ++it) grown[std::size_t(it.row() / 3)] = 1;
+  std::vector<int> out;
+  for (Eigen::Index k = 0; k < nb; ++k)
+    if (grown[std::size_t(k)]) out.push_back(int(k));
+  return out;
+}
 
 // Conjugate gradients, warm-started from x, with either a lagged Cholesky factor of an earlier system matrix or
 // the diagonal as preconditioner. The lagged factor is refreshed by a rent-or-buy rule. The solve right after a
@@ -782,6 +813,15 @@ class PcgSolver final : public LinearSolver {
     if (!m_have_factor) return m_bridge ? start_bridge() : refactor();
     return true;
   }
+  void prepare_bridge(SystemOperator& A, const SpMat& transfer) override {
+    m_prepared_local.reset();
+    if (!m_use_cholesky || m_opt.factor_lag_solves <= 0 || A.rows() % 3 != 0 || transfer.rows() * 3 != A.rows())
+      return;
+    auto local = std::make_unique<LocalSolve>();
+    if (!local->build(A, CutBridge::cut_region(transfer, A.pattern())) || local->empty()) return;
+    m_prepared_local = std::move(local);
+    m_prepared_rows = transfer.rows();
+  }
   void inherit(LinearSolver& previous, const SpMat& transfer) override {
     auto* old = dynamic_cast<PcgSolver*>(&previous);
     if (old == nullptr || !m_use_cholesky || m_opt.factor_lag_solves <= 0 || !old->m_use_cholesky ||
@@ -790,6 +830,8 @@ class PcgSolver final : public LinearSolver {
     old->drop_pending();
     m_rotations_front = transferred_rotations(old->m_rotations_front, transfer);
     m_bridge = std::make_unique<CutBridge>(std::move(old->m_front), transfer);
+    if (m_prepared_local && m_prepared_rows == transfer.rows()) m_bridge->set_local(std::move(m_prepared_local));
+    m_prepared_local.reset();
     // Its spare matrix's storage, emptied (the pattern is the old one's), for the new pattern's first factor.
     m_spare_matrix.swap(old->m_spare_matrix);
     m_spare_matrix.resize(0, 0);  // keeps the allocation
@@ -862,6 +904,7 @@ class PcgSolver final : public LinearSolver {
   // (factor_lag_solves solves after it started, as a refresh). Falls back to an inline factorisation when the bridge
   // cannot be built.
   bool start_bridge() {
+    m_bridge->drop_local_if_it_meets(m_fast_now);
     if (!m_bridge->build(*m_A)) {
       m_bridge.reset();
       return refactor();
@@ -1106,6 +1149,8 @@ class PcgSolver final : public LinearSolver {
   SpMat m_spare_matrix;                       ///< the last adopted refresh's matrix: the next one's storage
   std::unique_ptr<BackgroundFactorization> m_pending;  ///< the background refresh in flight, if any
   std::unique_ptr<CutBridge> m_bridge;        ///< an inherited factor, until this pattern's first one is in place
+  std::unique_ptr<LocalSolve> m_prepared_local;  ///< the bridge's exact solve, from prepare_bridge (until inherit)
+  Eigen::Index m_prepared_rows = 0;              ///< the rows (new DOFs) of the transfer it was prepared for
   bool m_bridging = false;                    ///< the solves are preconditioned through m_bridge
   /// While bridging: solves until the new pattern's first factor starts in the background (-1: none pending). The
   /// solve right after a cut builds the bridge, so the factor's assembly and copy wait for the next one.

@@ -73,6 +73,11 @@ class LinearSolver {
   /// preconditions its first solves with it through T while the new pattern's first factor is computed in the
   /// background; the others ignore it. `previous` is then left without a factor.
   virtual void inherit(LinearSolver& previous, const SpMat& transfer) {}
+  /// Called on the solver of a new revision before inherit(), where the revision is prepared (off the step's
+  /// thread), with its system at the state carried over (without contacts) and the transfer T: pcg with
+  /// factor_lag_solves > 0 factorises there the exact solve on the cut's region that its first solves combine with
+  /// the inherited factor, so that the first step after a cut does not. The others ignore it.
+  virtual void prepare_bridge(SystemOperator& A, const SpMat& transfer) {}
   /// The executor whose threads the solver may use for its products with A (pcg), or null for the calling thread
   /// alone. The executor must outlive the solver or be replaced first.
   virtual void set_executor(Executor* executor) {}

@@ -2,6 +2,7 @@
 // The linearised implicit Euler step, the static Newton solve, and the step guards (SPEC §3), over the FEM system of
 // fem_system.hpp.
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -121,8 +122,12 @@ class Simulator {
   /// state carried over from the current one, the FEM system of `model`, and the symbolic analysis of its system
   /// pattern in a new linear solver. Const and touching no shared state but the executor, so a cut can run it on
   /// another thread while the simulator is not stepped (and nothing else uses the executor). A failed analysis is
-  /// left to the next step, as in refresh_solver's callers.
-  [[nodiscard]] PreparedModel prepare_model(ObjectModel model, bool analyze) const;
+  /// left to the next step, as in refresh_solver's callers. When `spare_time` is given and returns true once the
+  /// analysis is done (the caller's other thread is still busy), it also does work of the first step after the
+  /// switch (pcg with factor_lag: LinearSolver::prepare_bridge, at dt and the state carried over); whether it does
+  /// changes no result, only when that work is done.
+  [[nodiscard]] PreparedModel prepare_model(ObjectModel model, bool analyze,
+                                            const std::function<bool()>& spare_time = {}) const;
   /// Switches to a prepared revision: afterwards the simulator is as set_model + refresh_solver would have left it.
   /// The state to carry over was taken when it was prepared: nothing may have stepped the simulator since.
   void adopt(PreparedModel prepared);
@@ -202,6 +207,7 @@ class Simulator {
   [[nodiscard]] std::vector<int> contact_dofs() const;
   /// dv = the start of the solve of a step of dt (m/s, 3 num_dofs), from the last steps' increments.
   void warm_start(double dt, VecX& dv) const;
+  void prepare_bridge(PreparedModel::Impl& p) const;
   // The defined reset after a step failed at the smallest dt, from the step's start state.
   void reset_failed_step(const SimState& start);
   // The linear solver's symbolic analysis of m_A, once per revision.

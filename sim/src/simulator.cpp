@@ -118,7 +118,9 @@ Simulator::Simulator(ObjectModel model, const SimulatorOptions& options)
 Simulator::~Simulator() = default;
 
 void Simulator::rebuild() {
+  FemSystem::Storage storage = m_fem ? m_fem->release_storage() : std::move(m_spare_storage);
   m_fem = std::make_unique<FemSystem>(m_model, *m_executor);
+  m_fem->reuse_storage(std::move(storage));
   m_constrained = constrained_flags(m_model);
   m_A = SpMat();
   m_pattern_analyzed = false;
@@ -183,6 +185,7 @@ PreparedModel Simulator::prepare_model(ObjectModel model, bool analyze, const st
   p.state = transfer_state(m_model, m_state, model);
   p.model = std::make_unique<ObjectModel>(std::move(model));
   p.fem = std::make_unique<FemSystem>(*p.model, *p.serial);
+  p.fem->reuse_storage(std::move(m_spare_storage));
   p.constrained = constrained_flags(*p.model);
   p.solver = make_solver(false);
   if (analyze && p.model->num_dofs() > 0) {
@@ -223,6 +226,7 @@ void Simulator::adopt(PreparedModel prepared) {
   m_model = std::move(*p.model);
   m_state = std::move(p.state);
   ++m_state_version;
+  if (m_fem) m_spare_storage = m_fem->release_storage();  // for the next revision's pattern
   m_fem = std::move(p.fem);
   m_fem->rebind(m_model, *m_executor);
   m_constrained = std::move(p.constrained);

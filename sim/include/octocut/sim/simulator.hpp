@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "octocut/sim/contact.hpp"
+#include "octocut/sim/fem_system.hpp"
 #include "octocut/sim/linear_solver.hpp"
 #include "octocut/sim/object.hpp"
 
@@ -241,6 +242,9 @@ class Simulator {
   StepProfile m_profile;
   std::unique_ptr<Executor> m_executor;
   std::unique_ptr<FemSystem> m_fem;
+  /// The storage of the revision before the current one's FEM system (FemSystem::release_storage), for the next
+  /// revision's to reuse. Mutable: prepare_model takes it, on the cut's model thread, while nothing else runs.
+  mutable FemSystem::Storage m_spare_storage;
   std::unique_ptr<LinearSolver> m_solver;
   std::vector<char> m_constrained;   ///< 1 for DOFs driven by a handle (num_dofs)
   SpMat m_A;                         ///< system matrix with the fixed pattern of this revision

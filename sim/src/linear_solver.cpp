@@ -533,7 +533,8 @@ class LocalSolve {
       return true;
     }
     try {
-      m_columns = A.columns(dofs);
+      SpMat columns = A.columns(dofs);
+      m_columns.swap(columns);  // not assigned: Eigen's SparseMatrix copies on assignment, even from a temporary
       const SpMat Al = rows_of(m_columns, dofs, A.rows());
       if (dofs != m_dofs || !m_factor.analyzed()) m_factor.analyze(Al);
       m_dofs = std::move(dofs);

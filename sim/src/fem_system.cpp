@@ -247,6 +247,14 @@ struct FemSystem::Impl {
         y.segment<3>(3 * g.dof) += g.w * ke.segment<3>(3 * g.corner);
   }
 
+  // Exchanges the pattern's storage and its assembly plan with `s` (release_storage, reuse_storage).
+  void swap_storage(FemSystem::Storage& s) noexcept {
+    pattern.swap(s.pattern);
+    pair_offsets.swap(s.pair_offsets);
+    diag_offsets.swap(s.diag_offsets);
+    pair_begin.swap(s.pair_begin);
+  }
+
   // The parts of the DOFs for the executor's threads (see part_dof), rebuilt when stale.
   int ensure_parts() {
     const int nd = model().num_dofs();
@@ -397,23 +405,14 @@ void FemSystem::rebind(const ObjectModel& model, Executor& executor) {
 }
 
 FemSystem::Storage FemSystem::release_storage() {
-  Impl& im = *m_impl;
   Storage out;
-  out.pattern.swap(im.pattern);
-  out.pair_offsets.swap(im.pair_offsets);
-  out.diag_offsets.swap(im.diag_offsets);
-  out.pair_begin.swap(im.pair_begin);
-  im.have_pattern = false;
+  m_impl->swap_storage(out);
+  m_impl->have_pattern = false;
   return out;  // NRVO, or Storage's swapping move
 }
 
 void FemSystem::reuse_storage(Storage&& storage) {
-  Impl& im = *m_impl;
-  if (im.have_pattern) return;
-  im.pattern.swap(storage.pattern);
-  im.pair_offsets.swap(storage.pair_offsets);
-  im.diag_offsets.swap(storage.diag_offsets);
-  im.pair_begin.swap(storage.pair_begin);
+  if (!m_impl->have_pattern) m_impl->swap_storage(storage);
 }
 
 void FemSystem::prolong(const std::vector<Vec3>& dofs, std::vector<Vec3>& slots) const {

@@ -40,12 +40,17 @@ double free_norm(const VecX& f, const std::vector<char>& constrained) {
 // factorise it, or to solve the contacts' region exactly). A step whose solver needs neither skips the assembly.
 class StepSystem final : public SystemOperator {
  public:
-  StepSystem(FemSystem& fem, const ElementFrame& frame, double m, double k, const std::vector<char>& constrained,
-             SpMat& storage)
-      : m_fem(fem), m_frame(frame), m_m(m), m_k(k), m_constrained(constrained), m_storage(storage),
+  /// The system of a step of dt (s) with Rayleigh damping C = alpha M + beta K: M + dt C + dt^2 K, so m = 1 + dt alpha
+  /// and k = dt beta + dt^2 (the one place both the step and the bridge prepared for it take them from).
+  StepSystem(FemSystem& fem, const ElementFrame& frame, double dt, const MaterialParams& params,
+             const std::vector<char>& constrained, SpMat& storage)
+      : m_fem(fem), m_frame(frame), m_m(1.0 + dt * params.rayleigh_mass),
+        m_k(dt * params.rayleigh_stiffness + dt * dt), m_constrained(constrained), m_storage(storage),
         m_nonzeros(fem.system_pattern(constrained).nonZeros()) {}
   std::vector<SystemBlock> contact;  ///< the contacts' blocks (contact_system_terms)
 
+  /// k, the stiffness's coefficient.
+  [[nodiscard]] double stiffness_coefficient() const { return m_k; }
   [[nodiscard]] Eigen::Index rows() const override { return 3 * Eigen::Index(m_constrained.size()); }
   [[nodiscard]] Eigen::Index nonzeros() const override { return m_nonzeros; }
   void product(const VecX& x, VecX& y) override {
@@ -209,10 +214,8 @@ PreparedModel Simulator::prepare_model(ObjectModel model, bool analyze, const st
 void Simulator::prepare_bridge(PreparedModel::Impl& p) const {
   ElementFrame frame;
   p.fem->rotations(p.state.x, frame);
-  const double dt = m_options.dt;
-  const double alpha = p.model->params().rayleigh_mass, beta = p.model->params().rayleigh_stiffness;
   SpMat storage;  // assembled only if the solver asks (it asks for columns)
-  StepSystem system(*p.fem, frame, 1.0 + dt * alpha, dt * beta + dt * dt, p.constrained, storage);
+  StepSystem system(*p.fem, frame, m_options.dt, p.model->params(), p.constrained, storage);
   p.solver->prepare_bridge(system, p.transfer);
 }
 
@@ -313,9 +316,9 @@ bool Simulator::solve_increment(double dt, const VecX& dv_c, VecX& dv) {
     rhs.segment<3>(3 * d) = dt * f;
   }
   // The system as an operator (assembled only if the solver asks), and the prescribed DOFs' coupling.
-  StepSystem system(*m_fem, frame, 1.0 + dt * alpha, dt * beta + dt * dt, m_constrained, m_A);
+  StepSystem system(*m_fem, frame, dt, m.params(), m_constrained, m_A);
   VecX coupling;
-  m_fem->system_coupling(dt * beta + dt * dt, frame, m_constrained, dv_c, coupling);
+  m_fem->system_coupling(system.stiffness_coefficient(), frame, m_constrained, dv_c, coupling);
   rhs -= coupling;
   m_profile.assembly = lap(t0);
   // Contact: penalty stiffness and damping in the system matrix, so stiff contact is stable at dt.

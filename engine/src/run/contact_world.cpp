@@ -9,8 +9,10 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <iterator>
 #include <limits>
+#include <unordered_map>
 
 #include "octocut/engine/io/mesh_io.hpp"
 #include "octocut/engine/run/scene_object.hpp"
@@ -98,6 +100,14 @@ struct Collider {
   std::vector<double> cache_clearance;            // per sample: distance known free of the surface there, m
   std::vector<double> last_depth;                 // per sample: its penetration at the last query, m (0: none)
   std::vector<NearestCertificate> certificate;    // per sample (triangle meshes): its nearest triangles, see there
+  // The mesh's angle-weighted pseudonormals (Baerentzen and Aanaes 2005), in its frame, unit: per triangle its face's,
+  // per triangle edge k (corners k, k + 1) the sum of its two faces', per vertex the sum of its faces' weighted by
+  // their angles there. A point lies inside a closed mesh when its offset from its nearest point on the surface
+  // points against the pseudonormal of the feature (face, edge or vertex) that point lies on; a face's normal
+  // alone misjudges points nearest to a sharp edge or vertex.
+  std::vector<btVector3> face_normals;    // |F|
+  std::vector<btVector3> edge_normals;    // 3 |F|
+  std::vector<btVector3> vertex_normals;  // |V|
 
   // Triangle `index`'s corners in the mesh's frame, as Bullet hands them to a query (its vertex times the mesh's
   // scaling; btStridingMeshInterface's processing of a double-precision vertex array).
@@ -130,6 +140,7 @@ struct NearestTriangle : btTriangleCallback {
   int kept = 0;
   int visits = 0;
   double outside = std::numeric_limits<double>::infinity();  // m
+  const Collider* mesh = nullptr;  // the collider whose triangles these are (its pseudonormals)
 
   void processTriangle(btVector3* tri, int, int index) override {
     btSubSimplexClosestResult r;
@@ -138,9 +149,21 @@ struct NearestTriangle : btTriangleCallback {
     if (dist < best) {
       best = dist;
       closest = dist > 0.0 ? r.m_closestPointOnSimplex : point;
-      face_normal = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
+      face_normal = pseudonormal(tri, index, r.m_usedVertices);
     }
     keep(dist, index, visits++);
+  }
+  // The pseudonormal of the feature of triangle `index` (corners `tri`) that the nearest point lies on: the
+  // triangle's face when all three corners span it, the edge of the two, or the corner (see Collider). Without the
+  // collider's pseudonormals, the face's normal.
+  [[nodiscard]] btVector3 pseudonormal(const btVector3* tri, int index, const btUsageBitfield& used) const {
+    const btVector3 face = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
+    if (mesh == nullptr || mesh->face_normals.empty()) return face;
+    const bool a = used.usedVertexA, b = used.usedVertexB, cc = used.usedVertexC;
+    const auto f = std::size_t(index);
+    if (a + b + cc == 2) return mesh->edge_normals[3 * f + (a && b ? 0 : b && cc ? 1 : 2)];
+    if (a + b + cc == 1) return mesh->vertex_normals[std::size_t(mesh->triangles[3 * f + (a ? 0 : b ? 1 : 2)])];
+    return face;
   }
   void keep(double dist, int index, int visit) {
     if (kept == K && !(dist < near_dist[K - 1])) {
@@ -207,6 +230,7 @@ double signed_distance(const Collider& c, const btTransform& pose, const Vec3& p
     return d;
   }
   NearestTriangle cb;
+  cb.mesh = &c;
   cb.point = pose.invXform(bt(p));
   const btVector3 e(depth, depth, depth);
   c.concave->processAllTriangles(&cb, cb.point - e, cb.point + e);
@@ -261,11 +285,13 @@ double tracked_distance(const Collider& c, const btTransform& pose, const Vec3& 
     // than any other triangle and than `deep`, so either the first query finds it (nearer than `near`) or the first
     // finds nothing nearer than `near` and the second finds it.
     NearestTriangle cb;
+    cb.mesh = &c;
     cb.point = pose.invXform(bt(p));
     const double moved = double((cb.point - certificate->anchor).length());
     for (int k = 0; k < certificate->count; ++k) {
-      std::array<btVector3, 3> corners = c.corners(certificate->candidates[std::size_t(k)]);
-      cb.processTriangle(corners.data(), 0, 0);
+      const int index = certificate->candidates[std::size_t(k)];
+      std::array<btVector3, 3> corners = c.corners(index);
+      cb.processTriangle(corners.data(), 0, index);
     }
     // The slack covers the rounding of the distances (about 1e-16 of the coordinates, here 1e-18 m).
     constexpr double kSlack = 1e-12;  // m
@@ -323,6 +349,7 @@ struct ContactWorld::Impl {
       if (c.body) world.removeRigidBody(c.body.get());
   }
   void set_mesh(Collider& c, const sim::TriMesh& mesh);
+  static void set_pseudonormals(Collider& c);
   void add(Collider c, double mass, const sim::Pose& pose);
   [[nodiscard]] sim::Pose pose_at(const Collider& c, double t, const std::vector<sim::Pose>& tools) const;
   void query(std::size_t ci, const sim::ContactSamples& samples, const std::vector<Vec3>& positions, double t,
@@ -342,6 +369,37 @@ void ContactWorld::Impl::set_mesh(Collider& c, const sim::TriMesh& mesh) {
   bvh->setMargin(kMargin);
   c.concave = bvh.get();
   c.shape = std::move(bvh);
+  set_pseudonormals(c);
+}
+
+void ContactWorld::Impl::set_pseudonormals(Collider& c) {
+  const std::size_t nf = c.triangles.size() / 3;
+  c.face_normals.assign(nf, btVector3(0, 0, 0));
+  c.edge_normals.assign(3 * nf, btVector3(0, 0, 0));
+  c.vertex_normals.assign(c.vertices.size() / 3, btVector3(0, 0, 0));
+  std::unordered_map<std::uint64_t, btVector3> edges;  // (lower vertex, higher vertex) -> sum of its faces' normals
+  const auto key = [&](std::size_t f, int k) {
+    const auto a = std::uint32_t(c.triangles[3 * f + std::size_t(k)]);
+    const auto b = std::uint32_t(c.triangles[3 * f + std::size_t((k + 1) % 3)]);
+    return (std::uint64_t(std::min(a, b)) << 32) | std::max(a, b);
+  };
+  for (std::size_t f = 0; f < nf; ++f) {
+    const std::array<btVector3, 3> x = c.corners(int(f));
+    btVector3 n = (x[1] - x[0]).cross(x[2] - x[0]);
+    if (!(n.length2() > 0.0)) continue;  // a degenerate face has no side
+    n.normalize();
+    c.face_normals[f] = n;
+    for (int k = 0; k < 3; ++k) {
+      edges.try_emplace(key(f, k), 0, 0, 0).first->second += n;
+      const btVector3 u = x[std::size_t((k + 1) % 3)] - x[std::size_t(k)];
+      const btVector3 w = x[std::size_t((k + 2) % 3)] - x[std::size_t(k)];
+      const double angle = std::atan2(double(u.cross(w).length()), double(u.dot(w)));
+      c.vertex_normals[std::size_t(c.triangles[3 * f + std::size_t(k)])] += btScalar(angle) * n;
+    }
+  }
+  for (std::size_t f = 0; f < nf; ++f)
+    for (int k = 0; k < 3; ++k)
+      if (const auto e = edges.find(key(f, k)); e != edges.end()) c.edge_normals[3 * f + std::size_t(k)] = e->second;
 }
 
 void ContactWorld::Impl::add(Collider c, double mass, const sim::Pose& pose) {

@@ -88,20 +88,23 @@ class ContactQuery : public test::TempDirTest {
   }
 };
 
+// A sample at p (m) of area `area` (m^2), its own DOF (x: the DOFs' positions, m); samples.begin holds its 0 first.
+void add_sample(sim::ContactSamples& samples, std::vector<Vec3>& x, const Vec3& p, double area) {
+  if (samples.begin.empty()) samples.begin.push_back(0);
+  samples.dofs.push_back({int(x.size()), 1.0});
+  samples.begin.push_back(int(samples.dofs.size()));
+  samples.rest.push_back(p);
+  samples.area.push_back(area);
+  samples.face.push_back(-1);
+  x.push_back(p);
+}
+
 // Samples on a grid over the L's footprint (and a little beyond it, 21 x 21 at 1 mm), 0.2 mm above its top face,
 // each its own DOF (x: their positions, m).
 void l_grid_samples(sim::ContactSamples& samples, std::vector<Vec3>& x) {
-  samples.begin.push_back(0);
   for (double gx = 0.05; gx < 2.1; gx += 0.1)
-    for (double gy = 0.05; gy < 2.1; gy += 0.1) {
-      const Vec3 p(0.01 * gx, 0.01 * gy, 0.01 * kHeight + 2e-4);
-      samples.dofs.push_back({int(x.size()), 1.0});
-      samples.begin.push_back(int(samples.dofs.size()));
-      samples.rest.push_back(p);
-      samples.area.push_back(1e-6);
-      samples.face.push_back(-1);
-      x.push_back(p);
-    }
+    for (double gy = 0.05; gy < 2.1; gy += 0.1)
+      add_sample(samples, x, Vec3(0.01 * gx, 0.01 * gy, 0.01 * kHeight + 2e-4), 1e-6);
 }
 
 // The contacts `c` of one step against the analytic truth for the grid at positions xs (m): every sample inside the
@@ -239,19 +242,13 @@ TEST_F(ContactQuery, CertifiedNearestTrianglesGiveTheContactsOfFullQueries) {
     return double(seed >> 11) / double(1ull << 52) - 1.0;
   };
   sim::ContactSamples samples;
-  samples.begin.push_back(0);
   std::vector<Vec3> x;
   std::vector<double> radius;  // m, each sample's distance from the centre, kept as it slides
   for (int k = 0; k < 2000; ++k) {
     const Vec3 dir = Vec3(uniform(), uniform(), uniform()).normalized();
     radius.push_back(kRadius + 4.5e-4 * uniform());
     if (std::abs(radius.back() - kRadius) < 5e-5) radius.back() = kRadius + 5e-5;
-    samples.dofs.push_back({int(x.size()), 1.0});
-    samples.begin.push_back(int(samples.dofs.size()));
-    samples.rest.push_back(radius.back() * dir);
-    samples.area.push_back(1e-8);
-    samples.face.push_back(-1);
-    x.push_back(radius.back() * dir);
+    add_sample(samples, x, radius.back() * dir, 1e-8);
   }
   ContactWorld kept(scene, {}, 1e9, kDepth), fresh(scene, {}, 1e9, kDepth);
   sim::Executor executor(2);
@@ -283,6 +280,76 @@ TEST_F(ContactQuery, CertifiedNearestTrianglesGiveTheContactsOfFullQueries) {
   // Most queries of samples that slid by 2 um are certified; none of those that slid by 0.4 mm.
   EXPECT_GT(certified, searched / 2);
   EXPECT_LT(certified, 2 * searched);
+}
+
+// A regular tetrahedron of 1 cm edges (its dihedral angles 70.5 deg): points 0.2 mm outside it, nearest to an edge or
+// a corner, in the directions between the faces there (an edge's or a corner's Voronoi region), are outside and get
+// no contact, and points 0.2 mm inside below each face get that face's distance and normal. The side of a point is
+// decided by the pseudonormal of the feature nearest to it: a face's normal alone puts a point near a sharp edge
+// inside when its nearest triangle is the face it does not lie in front of.
+TEST_F(ContactQuery, PointsNearASharpEdgeOrCornerAreOnTheSideItsPseudonormalGives) {
+  const std::array<Vec3, 4> v = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0.5, std::sqrt(3.0) / 2, 0),
+                                 Vec3(0.5, std::sqrt(3.0) / 6, std::sqrt(2.0 / 3.0))};  // cm
+  const std::array<std::array<int, 3>, 4> faces = {{{0, 2, 1}, {0, 1, 3}, {1, 2, 3}, {2, 0, 3}}};  // outward
+  std::string obj;
+  for (const Vec3& p : v)
+    obj += "v " + std::to_string(p.x()) + " " + std::to_string(p.y()) + " " + std::to_string(p.z()) + "\n";
+  std::array<Vec3, 4> normal;
+  for (std::size_t f = 0; f < 4; ++f) {
+    const auto& t = faces[f];
+    obj += "f " + std::to_string(t[0] + 1) + " " + std::to_string(t[1] + 1) + " " + std::to_string(t[2] + 1) + "\n";
+    const Vec3 &a = v[std::size_t(t[0])], &b = v[std::size_t(t[1])], &c = v[std::size_t(t[2])];
+    normal[f] = (b - a).cross(c - a).normalized();
+  }
+  const Scene scene = fixed_mesh_scene(obj);
+  const auto has = [&](std::size_t f, int a) { return faces[f][0] == a || faces[f][1] == a || faces[f][2] == a; };
+  constexpr double kOffset = 2e-4;  // m
+  sim::ContactSamples samples;
+  std::vector<Vec3> x;
+  std::vector<int> inside_face;  // per sample: the face it lies below, or -1 (outside)
+  const auto add = [&](const Vec3& p, int face) {
+    add_sample(samples, x, p, 1e-8);
+    inside_face.push_back(face);
+  };
+  for (int a = 0; a < 4; ++a)
+    for (int b = a + 1; b < 4; ++b) {
+      std::vector<Vec3> n;  // the normals of the two faces along edge ab
+      for (std::size_t f = 0; f < 4; ++f)
+        if (has(f, a) && has(f, b)) n.push_back(normal[f]);
+      for (const double t : {0.3, 0.5, 0.7})
+        for (const double w : {0.1, 0.9}) {
+          const Vec3 on = 0.01 * (v[std::size_t(a)] + t * (v[std::size_t(b)] - v[std::size_t(a)]));
+          add(on + kOffset * (w * n[0] + (1.0 - w) * n[1]).normalized(), -1);
+        }
+    }
+  for (int a = 0; a < 4; ++a) {
+    std::vector<Vec3> n;  // the normals of the three faces at corner a
+    for (std::size_t f = 0; f < 4; ++f)
+      if (has(f, a)) n.push_back(normal[f]);
+    for (int k = 0; k < 3; ++k)
+      add(0.01 * v[std::size_t(a)] + kOffset * (0.8 * n[std::size_t(k)] + 0.1 * n[std::size_t((k + 1) % 3)] +
+                                                 0.1 * n[std::size_t((k + 2) % 3)]).normalized(), -1);
+  }
+  for (std::size_t f = 0; f < 4; ++f)
+    for (const std::array<double, 3>& w : {std::array<double, 3>{1.0 / 3, 1.0 / 3, 1.0 / 3}, {0.5, 0.3, 0.2}}) {
+      const Vec3 on = 0.01 * (w[0] * v[std::size_t(faces[f][0])] + w[1] * v[std::size_t(faces[f][1])] +
+                              w[2] * v[std::size_t(faces[f][2])]);
+      add(on - kOffset * normal[f], int(f));
+    }
+  ContactWorld world(scene, {}, 1e9, 5e-4);
+  sim::Executor executor(1);
+  const std::vector<sim::Contact> c = world.find(samples, x, 0.0, 0.001, {}, {}, &executor);
+  std::size_t next = 0;
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    const bool found = next < c.size() && c[next].dofs[0].dof == int(i);
+    EXPECT_EQ(found, inside_face[i] >= 0) << "sample " << i << " at " << (100.0 * x[i]).transpose() << " cm";
+    if (!found) continue;
+    const sim::Contact& k = c[next++];
+    EXPECT_NEAR(k.penetration, kOffset, 1e-9) << "sample " << i;
+    EXPECT_GT(k.normal.dot(normal[std::size_t(inside_face[i])]), 0.9999) << "sample " << i;
+  }
+  EXPECT_EQ(next, c.size());
+  EXPECT_EQ(c.size(), 8u);
 }
 
 }  // namespace

@@ -716,6 +716,61 @@ void ContactWorld::reset_samples() {
   }
 }
 
+void ContactWorld::remap_samples(const std::vector<int>& old_of_new) {
+  const std::size_t n = old_of_new.size();
+  for (Collider& c : m->colliders) {
+    if (m->samples == 0 || c.cache_local.size() != m->samples) {  // not queried with the old samples: nothing kept
+      c.cache_local.clear();
+      c.cache_clearance.clear();
+      c.last_depth.clear();
+      c.certificate.clear();
+      continue;
+    }
+    // A new sample starts as a first query does (no clearance, not inside, no certificate).
+    std::vector<Vec3> local(n, Vec3::Zero());
+    std::vector<double> clearance(n, -1.0), depth(n, 0.0);
+    std::vector<NearestCertificate> certificate(c.concave ? n : 0);
+    for (std::size_t i = 0; i < n; ++i) {
+      const int o = old_of_new[i];
+      if (o < 0 || std::size_t(o) >= m->samples) continue;
+      local[i] = c.cache_local[std::size_t(o)];
+      clearance[i] = c.cache_clearance[std::size_t(o)];
+      depth[i] = c.last_depth[std::size_t(o)];
+      if (c.concave) certificate[i] = c.certificate[std::size_t(o)];
+    }
+    c.cache_local = std::move(local);
+    c.cache_clearance = std::move(clearance);
+    c.last_depth = std::move(depth);
+    c.certificate = std::move(certificate);
+  }
+  m->samples = n;
+}
+
+std::vector<int> same_rest_positions(const std::vector<Vec3>& before, const std::vector<Vec3>& after) {
+  // Keyed by the coordinates' bits: a sample a cut left keeps its rest position exactly (S's vertices do not move,
+  // and a face point of a face the cut did not touch is computed from the same corners).
+  struct Key {
+    std::array<double, 3> p;
+    bool operator==(const Key& k) const { return p == k.p; }
+  };
+  struct Hash {
+    std::size_t operator()(const Key& k) const {
+      std::size_t h = 0;
+      for (const double v : k.p) h = h * 1000003u ^ std::hash<double>{}(v);
+      return h;
+    }
+  };
+  std::unordered_map<Key, int, Hash> index;
+  index.reserve(before.size());
+  for (std::size_t i = 0; i < before.size(); ++i)
+    index.try_emplace(Key{{before[i].x(), before[i].y(), before[i].z()}}, int(i));
+  std::vector<int> out(after.size(), -1);
+  for (std::size_t i = 0; i < after.size(); ++i)
+    if (const auto it = index.find(Key{{after[i].x(), after[i].y(), after[i].z()}}); it != index.end())
+      out[i] = it->second;
+  return out;
+}
+
 const std::vector<ColliderState>& ContactWorld::colliders() const { return m->states; }
 const ContactProfile& ContactWorld::profile() const { return m->profile; }
 double ContactWorld::max_penetration() const { return m->max_penetration; }

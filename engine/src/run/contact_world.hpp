@@ -44,6 +44,9 @@ struct ContactProfile {
   long certified = 0;    ///< samples whose nearest triangle it took from their last query's certificate instead
 };
 
+/// For each rest position of `after` (m), the index of the same position in `before` (bit for bit), or -1.
+std::vector<int> same_rest_positions(const std::vector<sim::Vec3>& before, const std::vector<sim::Vec3>& after);
+
 class ContactWorld {
  public:
   /// Builds the Bullet world of `scene`: the colliding tools (mesh, or else blade: `tool_shapes[i]` in tool
@@ -69,8 +72,14 @@ class ContactWorld {
   /// kinematic bodies and tools at their poses there.
   void finish(const std::vector<sim::ContactOutcome>& outcomes, double t, double dt,
               const std::vector<sim::Pose>& tool_next);
-  /// Forgets the per-sample query cache (after a cut changed the samples).
+  /// Forgets the per-sample query cache.
   void reset_samples();
+  /// After a cut changed the samples: keeps the query cache of each new sample i that an old sample old_of_new[i]
+  /// stands at (same_rest_positions), and starts the others (old_of_new[i] < 0) without one, as a first query does.
+  /// The cache is of positions in the colliders' frames (where a sample was last queried, the distance known free of
+  /// the surface around there, its depth there, the nearest triangles there), so any sample may take it; a cut that
+  /// forgot it made the step after it query every sample in a collider's box anew.
+  void remap_samples(const std::vector<int>& old_of_new);
 
   [[nodiscard]] const std::vector<ColliderState>& colliders() const;
   [[nodiscard]] const ContactProfile& profile() const;

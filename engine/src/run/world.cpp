@@ -260,10 +260,12 @@ void World::Impl::load_body_meshes() {
 void World::Impl::refresh_samples() {
   if (!contact) return;
   drawn_contacts.clear();  // their DOF rows belong to the model before the cut
+  const std::vector<sim::Vec3> before = std::move(samples.rest);
   if (sim->empty()) samples = sim::ContactSamples{};
   else samples = sim::build_contact_samples(sim->model(), object.surface, *embedding, contact_resolution);
   if (samples.begin.empty()) samples.begin.push_back(0);
-  contact->reset_samples();
+  // The samples the cut left keep what the colliders' queries know of where they are.
+  contact->remap_samples(same_rest_positions(before, samples.rest));
 }
 
 void World::Impl::contact_before_step() {

@@ -352,5 +352,55 @@ TEST_F(ContactQuery, PointsNearASharpEdgeOrCornerAreOnTheSideItsPseudonormalGive
   EXPECT_EQ(c.size(), 8u);
 }
 
+// A cut rebuilds S's collision samples: the samples it leaves keep what the colliders' queries knew of them
+// (remap_samples through same_rest_positions). Samples pressed 3 mm into the L-shaped prism (six times the search
+// depth, so that a first query would find no triangle and call them outside), then reordered, every seventh
+// dropped and new ones added above the prism, go on colliding at their analytic distance to its surface; the new
+// ones stay outside. With the caches forgotten (reset_samples, as a cut did before) the pressed samples lose their
+// contacts.
+TEST_F(ContactQuery, SamplesACutLeavesKeepTheirContactsDeepInsideAMesh) {
+  const Scene scene = fixed_mesh_scene();
+  constexpr double kDepth = 5e-4;  // m
+  sim::ContactSamples samples;
+  std::vector<Vec3> x;
+  l_grid_samples(samples, x);
+  std::size_t kept_contacts = 0;
+  for (const bool remap : {true, false}) {
+    ContactWorld world(scene, {}, 1e9, kDepth);
+    sim::Executor executor(2);
+    std::vector<Vec3> xs = x;
+    std::vector<double> penetrations;  // m
+    for (int step = 0; step < 22; ++step) {
+      expect_l_contacts(world.find(samples, xs, 0.001 * step, 0.001, {}, {}, &executor), xs, step, penetrations);
+      if (HasFatalFailure()) return;
+      for (Vec3& p : xs) p.z() -= 1.5e-4;
+    }
+    // The cut: the samples in reverse order without every seventh, then 20 new ones 0.2 mm above the top face.
+    sim::ContactSamples after;
+    std::vector<Vec3> xa;
+    for (int i = samples.size() - 1; i >= 0; --i)
+      if (i % 7 != 3) {
+        add_sample(after, xa, samples.rest[std::size_t(i)], 1e-6);
+        xa.back() = xs[std::size_t(i)];
+      }
+    for (int k = 0; k < 20; ++k) add_sample(after, xa, Vec3(0.0005 + 0.001 * k, 0.0005, 0.01 * kHeight + 2e-4), 1e-6);
+    if (remap)
+      world.remap_samples(same_rest_positions(samples.rest, after.rest));
+    else
+      world.reset_samples();
+    const std::vector<sim::Contact> c = world.find(after, xa, 0.022, 0.001, {}, {}, &executor);
+    if (!remap) {
+      // Deeper than the search depth without a history: outside, wrongly, but for those near a side wall.
+      EXPECT_LT(5 * c.size(), kept_contacts);
+      continue;
+    }
+    std::vector<double> deep;
+    expect_l_contacts(c, xa, 22, deep);
+    kept_contacts = deep.size();
+    EXPECT_GT(kept_contacts, 250u);
+    EXPECT_GT(*std::max_element(deep.begin(), deep.end()), 5.0 * kDepth);
+  }
+}
+
 }  // namespace
 }  // namespace octocut::engine

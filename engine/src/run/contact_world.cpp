@@ -100,12 +100,11 @@ struct Collider {
   std::vector<double> cache_clearance;            // per sample: distance known free of the surface there, m
   std::vector<double> last_depth;                 // per sample: its penetration at the last query, m (0: none)
   std::vector<NearestCertificate> certificate;    // per sample (triangle meshes): its nearest triangles, see there
-  // The mesh's angle-weighted pseudonormals (Baerentzen and Aanaes 2005), in its frame, unit: per triangle its face's,
-  // per triangle edge k (corners k, k + 1) the sum of its two faces', per vertex the sum of its faces' weighted by
-  // their angles there. A point lies inside a closed mesh when its offset from its nearest point on the surface
-  // points against the pseudonormal of the feature (face, edge or vertex) that point lies on; a face's normal
-  // alone misjudges points nearest to a sharp edge or vertex.
-  std::vector<btVector3> face_normals;    // |F|
+  // The mesh's angle-weighted pseudonormals (Baerentzen and Aanaes 2005), in its frame: per triangle edge k (corners
+  // k, k + 1) the sum of its two faces' unit normals, per vertex the sum of its faces' unit normals weighted by their
+  // angles there (a face's own is its normal). A point lies inside a closed mesh when its offset from its nearest
+  // point on the surface points against the pseudonormal of the feature (face, edge or vertex) that point lies on; a
+  // face's normal alone misjudges points nearest to a sharp edge or vertex.
   std::vector<btVector3> edge_normals;    // 3 |F|
   std::vector<btVector3> vertex_normals;  // |V|
 
@@ -158,7 +157,7 @@ struct NearestTriangle : btTriangleCallback {
   // collider's pseudonormals, the face's normal.
   [[nodiscard]] btVector3 pseudonormal(const btVector3* tri, int index, const btUsageBitfield& used) const {
     const btVector3 face = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
-    if (mesh == nullptr || mesh->face_normals.empty()) return face;
+    if (mesh == nullptr || mesh->edge_normals.empty()) return face;
     const bool a = used.usedVertexA, b = used.usedVertexB, cc = used.usedVertexC;
     const auto f = std::size_t(index);
     if (a + b + cc == 2) return mesh->edge_normals[3 * f + (a && b ? 0 : b && cc ? 1 : 2)];
@@ -374,7 +373,6 @@ void ContactWorld::Impl::set_mesh(Collider& c, const sim::TriMesh& mesh) {
 
 void ContactWorld::Impl::set_pseudonormals(Collider& c) {
   const std::size_t nf = c.triangles.size() / 3;
-  c.face_normals.assign(nf, btVector3(0, 0, 0));
   c.edge_normals.assign(3 * nf, btVector3(0, 0, 0));
   c.vertex_normals.assign(c.vertices.size() / 3, btVector3(0, 0, 0));
   std::unordered_map<std::uint64_t, btVector3> edges;  // (lower vertex, higher vertex) -> sum of its faces' normals
@@ -388,7 +386,6 @@ void ContactWorld::Impl::set_pseudonormals(Collider& c) {
     btVector3 n = (x[1] - x[0]).cross(x[2] - x[0]);
     if (!(n.length2() > 0.0)) continue;  // a degenerate face has no side
     n.normalize();
-    c.face_normals[f] = n;
     for (int k = 0; k < 3; ++k) {
       edges.try_emplace(key(f, k), 0, 0, 0).first->second += n;
       const btVector3 u = x[std::size_t((k + 1) % 3)] - x[std::size_t(k)];

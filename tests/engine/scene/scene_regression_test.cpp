@@ -3,6 +3,7 @@
 // says which subsystems were built, which must be exactly those the scene uses.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -91,6 +92,51 @@ INSTANTIATE_TEST_SUITE_P(Contact, SceneRegression, ::testing::ValuesIn(kContact)
 #else
 INSTANTIATE_TEST_SUITE_P(Shipped, SceneRegression, ::testing::ValuesIn(kCi),
                          [](const auto& info) { return info.param; });
+
+// Issue 20 asks for the shipped scenes' figures at their own settings with an error of at most 1 % against exact
+// solves. `meniscus_punch` (contact, six bites, PCG at its shipped tolerance and factor lag) against the same scene
+// with CHOLMOD solving every step exactly: every cut's removed volume and every probe's displacement within 1 %. Its
+// later bites graze earlier holes, so what they remove is a steep function of where the tissue is: a solver or contact
+// change that makes the run chaotic again fails here (before the pseudonormals the fourth and sixth bites were 51 %
+// and 14 % off at tolerance 1e-4, 68 % and 3.5 % at 1e-3).
+TEST(SceneAccuracy, MeniscusPunchFollowsExactSolvesWithinOnePercent) {
+  const fs::path scene = kScenes / "meniscus_punch.json";
+  nlohmann::json report[2];
+  const std::string sets[2] = {"", " --set '/solver/linear_solver=\"cholmod\"'"};
+  for (int k = 0; k < 2; ++k) {
+    const fs::path out = fs::temp_directory_path() /
+                         ("octocut_accuracy_" + std::to_string(k) + "_" + std::to_string(::getpid()));
+    fs::remove_all(out);
+    const auto r = test::run_octocut("run '" + scene.string() + "' --no-render --quiet" + sets[k] + " --out '" +
+                                     out.string() + "'");
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    std::ifstream in(out / "report.json");
+    report[k] = nlohmann::json::parse(in);
+    fs::remove_all(out);
+  }
+  const auto& cuts = report[0].at("cuts");
+  const auto& exact_cuts = report[1].at("cuts");
+  ASSERT_EQ(cuts.size(), 6u);
+  ASSERT_EQ(exact_cuts.size(), cuts.size());
+  for (std::size_t c = 0; c < cuts.size(); ++c) {
+    const double v = cuts[c].at("removed_volume_m3").get<double>();
+    const double exact = exact_cuts[c].at("removed_volume_m3").get<double>();  // m^3
+    EXPECT_NEAR(v, exact, 0.01 * exact) << "cut " << c;
+  }
+  int probes = 0;
+  for (const auto& [name, probe] : report[1].at("probes").items()) {
+    const auto& d = report[0].at("probes").at(name).at("displacement");
+    const auto& e = probe.at("displacement");  // m (3)
+    double err = 0.0, norm = 0.0;
+    for (int i = 0; i < 3; ++i) {
+      err += std::pow(d[i].get<double>() - e[i].get<double>(), 2);
+      norm += std::pow(e[i].get<double>(), 2);
+    }
+    EXPECT_LE(std::sqrt(err), 0.01 * std::sqrt(norm)) << "probe " << name;
+    ++probes;
+  }
+  EXPECT_GE(probes, 2);
+}
 
 TEST(SceneRegressionList, ListsEveryScene) {
   std::vector<std::string> found;

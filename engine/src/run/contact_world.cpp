@@ -108,6 +108,14 @@ struct Collider {
   std::vector<btVector3> edge_normals;    // 3 |F|
   std::vector<btVector3> vertex_normals;  // |V|
 
+  // Forgets the per-sample caches above (the next query sizes them afresh).
+  void forget_samples() {
+    cache_local.clear();
+    cache_clearance.clear();
+    last_depth.clear();
+    certificate.clear();
+  }
+
   // Triangle `index`'s corners in the mesh's frame, as Bullet hands them to a query (its vertex times the mesh's
   // scaling; btStridingMeshInterface's processing of a double-precision vertex array).
   [[nodiscard]] std::array<btVector3, 3> corners(int index) const {
@@ -705,22 +713,14 @@ void ContactWorld::finish(const std::vector<sim::ContactOutcome>& outcomes, doub
 }
 
 void ContactWorld::reset_samples() {
-  for (Collider& c : m->colliders) {
-    c.cache_local.clear();
-    c.cache_clearance.clear();
-    c.last_depth.clear();
-    c.certificate.clear();
-  }
+  for (Collider& c : m->colliders) c.forget_samples();
 }
 
 void ContactWorld::remap_samples(const std::vector<int>& old_of_new) {
   const std::size_t n = old_of_new.size();
   for (Collider& c : m->colliders) {
     if (m->samples == 0 || c.cache_local.size() != m->samples) {  // not queried with the old samples: nothing kept
-      c.cache_local.clear();
-      c.cache_clearance.clear();
-      c.last_depth.clear();
-      c.certificate.clear();
+      c.forget_samples();
       continue;
     }
     // A new sample starts as a first query does (no clearance, not inside, no certificate).

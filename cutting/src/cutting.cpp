@@ -813,13 +813,15 @@ void commit_removed(CutObject& object, sim::Simulator& simulator, SurfaceTransac
 
 // The solver part of stage 5: the simulator takes the new revision as the model thread prepared it (joined first),
 // or, should the preparation have failed, sets it and refreshes its solver here (a failed analysis is the next
-// step's to handle). Returns the stage's ms, the model thread's preparation included.
-double adopt_model(sim::Simulator& simulator, ModelStages& stages) {
+// step's to handle). Returns the stage's ms, the model thread's preparation included but not the first step's bridge
+// solve it prepared, which goes to `bridge_ms`.
+double adopt_model(sim::Simulator& simulator, ModelStages& stages, double& bridge_ms) {
   ModelWork& work = stages.finished();
   const auto t0 = Clock::now();
   if (work.have_prepared) {
+    bridge_ms = work.prepared.bridge_ms();
     simulator.adopt(std::move(work.prepared));
-    return work.ms_prepare + ms_since(t0);
+    return work.ms_prepare - bridge_ms + ms_since(t0);
   }
   simulator.set_model(*work.next);
   try {
@@ -907,7 +909,7 @@ Verdict run_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceEmbedd
   const sim::SurfaceEdit edit = surface.compact(cut.unused, simulator.executor());
   embedding.update(*work.next, object.surface, edit, &simulator.executor());
   out.ms.embedding = ms_since(t0);
-  out.ms.solver_update = adopt_model(simulator, stages);
+  out.ms.solver_update = adopt_model(simulator, stages, out.ms.bridge);
   surface.commit();
   object.surface_checked = object.surface_checked && options.verify;
   remember_blades(object, rest);

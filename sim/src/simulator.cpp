@@ -172,6 +172,7 @@ struct PreparedModel::Impl {
   std::unique_ptr<LinearSolver> solver;
   bool analyzed = false;
   SpMat transfer;  // DOF values old revision -> this one (num_dofs x old num_dofs), for the solver's inherit()
+  double bridge_ms = 0.0;  // wall time of prepare_bridge, ms; 0 when it did not run
 };
 
 PreparedModel::PreparedModel() = default;
@@ -181,6 +182,10 @@ PreparedModel::~PreparedModel() = default;
 const ObjectModel& PreparedModel::model() const {
   if (!m_impl) throw std::logic_error("PreparedModel::model: empty");
   return *m_impl->model;
+}
+double PreparedModel::bridge_ms() const {
+  if (!m_impl) throw std::logic_error("PreparedModel::bridge_ms: empty");
+  return m_impl->bridge_ms;
 }
 
 PreparedModel Simulator::prepare_model(ObjectModel model, bool analyze, const std::function<bool()>& spare_time) const {
@@ -199,7 +204,11 @@ PreparedModel Simulator::prepare_model(ObjectModel model, bool analyze, const st
       p.analyzed = true;
       if (m_options.factor_lag > 0 && m_options.linear_solver == "pcg") {
         p.transfer = transfer_matrix(m_model, *p.model);
-        if (m_options.dynamic && spare_time && spare_time()) prepare_bridge(p);
+        if (m_options.dynamic && spare_time && spare_time()) {
+          const auto t0 = Clock::now();
+          prepare_bridge(p);
+          p.bridge_ms = ms_since(t0);
+        }
       }
     } catch (const std::exception&) {
       // The next step analyses the pattern again, and its guards handle a solver failure.

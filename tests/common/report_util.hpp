@@ -27,6 +27,7 @@ inline std::string report_without_timings(nlohmann::json report) {
     for (nlohmann::json& c : report["cuts"]) {
       c.erase("ms");
       c.erase("latency_ms");
+      c.erase("bridge_ms");
       c.erase("settle_max_ms");
     }
   return report.dump();

@@ -385,13 +385,14 @@ std::vector<BenchOutput> bench_cut(const std::string& scene_name) {
   // From the report, where each cut's latency_ms includes the first step after it.
   const std::vector<CutSummary> cuts = world.report().cuts;
   std::array<std::vector<double>, kCutStageKeys.size()> stage;
-  std::vector<double> latency;
+  std::vector<double> latency, bridge;
   int ok = 0, skipped = 0, noop = 0;
   for (const CutSummary& c : cuts) {
     if (c.status == "ok") {
       ++ok;
       for (std::size_t k = 0; k < kCutStageKeys.size(); ++k) stage[k].push_back(c.ms[k]);
       latency.push_back(c.latency_ms);
+      bridge.push_back(c.bridge_ms);
     } else if (c.status == "skipped") {
       ++skipped;
     } else {
@@ -407,6 +408,7 @@ std::vector<BenchOutput> bench_cut(const std::string& scene_name) {
   for (std::size_t k = 0; k < kCutStageKeys.size(); ++k)
     b.metrics[std::string(kCutStageKeys[k]) + "_ms"] = median_of(stage[k]);
   b.metrics["latency_ms"] = median_of(latency);  // the cut plus the first step after it
+  b.metrics["bridge_ms"] = median_of(bridge);    // the first step's work the model thread did ahead of it
   if (!cuts.empty()) {
     b.metrics["elements_after"] = cuts.back().elements_after;
     b.metrics["surface_vertices_after"] = cuts.back().surface_vertices_after;

@@ -79,6 +79,7 @@ std::string report_json(const Report& r) {
                          {"dofs_after", c.dofs_after},
                          {"surface_vertices_after", c.surface_vertices_after},
                          {"latency_ms", c.latency_ms},
+                         {"bridge_ms", c.bridge_ms},
                          {"settle_max_ms", c.settle_max_ms},
                          {"ms", ms}});
   }

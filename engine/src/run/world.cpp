@@ -404,6 +404,7 @@ CutSummary World::Impl::cut(std::size_t i, double t, bool scheduled) {
   c.ms = {o.ms.back_transform, o.ms.surface, o.ms.material_graph, o.ms.refine, o.ms.node_split,
           o.ms.embedding,      o.ms.solver_update, o.ms.total};
   c.latency_ms = c.ms.back();
+  c.bridge_ms = o.ms.bridge;
   settling.emplace_back(cuts.size(), CutSummary::kSettleSteps);
   cuts.push_back(c);
 

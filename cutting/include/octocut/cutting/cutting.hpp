@@ -100,6 +100,10 @@ struct CutRequest {
 struct CutStageMs {
   double back_transform = 0.0, surface = 0.0, material_graph = 0.0, refine = 0.0, node_split = 0.0,
          embedding = 0.0, solver_update = 0.0, total = 0.0;
+  /// Not a stage: what the model thread spent preparing the first step's bridge solve (sim::PreparedModel::bridge_ms)
+  /// while the surface stage still ran, ms. Work of the step after the cut done ahead of it, so not in solver_update;
+  /// in the total only as far as the cut waited for it.
+  double bridge = 0.0;
 };
 
 /// What one cut did (the report's `cuts[]` entry, SPEC §8).

@@ -91,6 +91,9 @@ class PreparedModel {
   ~PreparedModel();
   /// The prepared revision. Throws std::logic_error when empty (default-constructed or moved from).
   [[nodiscard]] const ObjectModel& model() const;
+  /// Wall time spent preparing the first step's bridge solve (Simulator::prepare_model with spare time), ms; 0 when
+  /// it was not prepared. That is work of the step after the cut, done ahead of it. Throws like model().
+  [[nodiscard]] double bridge_ms() const;
 
  private:
   friend class Simulator;

@@ -44,6 +44,9 @@ struct CutSummary {
   /// What the user waits for: the cut's total plus the first simulation step after it, ms (the cut alone when the
   /// run ends before another step).
   double latency_ms = 0.0;
+  /// The first step's bridge solve, which the cut's model thread prepared while the surface stage still ran, ms (0
+  /// when it did not): work of that step done ahead of it, outside ms's solver_update (CutStageMs::bridge).
+  double bridge_ms = 0.0;
   /// The longest simulation step (contact, step, surface update; no cut) among the kSettleSteps steps after the cut,
   /// fewer when the run ends first, ms: whether the cut stalls the steps that follow it (the solver's bridge and
   /// its background factorisation).

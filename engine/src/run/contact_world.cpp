@@ -359,9 +359,32 @@ struct ContactWorld::Impl {
   static void set_pseudonormals(Collider& c);
   void add(Collider c, double mass, const sim::Pose& pose);
   [[nodiscard]] sim::Pose pose_at(const Collider& c, double t, const std::vector<sim::Pose>& tools) const;
-  void query(std::size_t ci, const sim::ContactSamples& samples, const std::vector<Vec3>& positions, double t,
-             double dt, const std::vector<sim::Pose>& now, const std::vector<sim::Pose>& next, sim::Executor* executor,
-             std::vector<sim::Contact>& out);
+
+  // One collider's frame for this step's queries (ContactWorld::find).
+  struct QueryFrame {
+    sim::Pose pose, pose_next;  // at t and t + dt
+    btTransform tr;             // pose, Bullet's
+    btVector3 lo, hi;           // Bullet's bounding box of the shape at pose, m
+    Vec3 near_lo, near_hi;      // that box grown by what a sample can cover relative to the shape in a step, m
+    btVector3 com;              // a dynamic body's centre of mass, m
+  };
+  // What one chunk of queries found.
+  struct Found {
+    std::vector<sim::Contact> contacts;
+    std::vector<ContactRef> refs;
+    double max_penetration = 0.0;  // m
+    long searched = 0, certified = 0;
+  };
+  // The frame of collider ci for n samples at t (sizes its caches for them).
+  QueryFrame frame_of(std::size_t ci, int n, double t, double dt, const std::vector<sim::Pose>& now,
+                      const std::vector<sim::Pose>& next);
+  // Appends to `out` the samples of [b, e) that collider ci must query (ascending); remembers those just outside its
+  // box as outside.
+  void scan(std::size_t ci, const QueryFrame& f, const std::vector<Vec3>& positions, int b, int e,
+            std::vector<int>& out);
+  // Queries sample i against collider ci: updates its cache entries and adds its contact, if any, to `found`.
+  void query_sample(std::size_t ci, const QueryFrame& f, const sim::ContactSamples& samples,
+                    const std::vector<Vec3>& positions, int i, double dt, Found& found);
 };
 
 void ContactWorld::Impl::set_mesh(Collider& c, const sim::TriMesh& mesh) {
@@ -509,142 +532,114 @@ ContactWorld::ContactWorld(const Scene& scene, const std::vector<sim::TriMesh>& 
 
 ContactWorld::~ContactWorld() = default;
 
-void ContactWorld::Impl::query(std::size_t ci, const sim::ContactSamples& samples,
-                               const std::vector<Vec3>& positions, double t, double dt, const std::vector<sim::Pose>& now,
-                               const std::vector<sim::Pose>& next, sim::Executor* executor,
-                               std::vector<sim::Contact>& out) {
+ContactWorld::Impl::QueryFrame ContactWorld::Impl::frame_of(std::size_t ci, int n, double t, double dt,
+                                                           const std::vector<sim::Pose>& now,
+                                                           const std::vector<sim::Pose>& next) {
   Collider& c = colliders[ci];
-  const sim::Pose pose = pose_at(c, t, now);
-  const sim::Pose pose_next = c.kinematic ? pose_at(c, t + dt, next) : pose;
-  const btTransform tr = bt(pose);
-  btVector3 lo, hi;
-  c.shape->getAabb(tr, lo, hi);
+  QueryFrame f;
+  f.pose = pose_at(c, t, now);
+  f.pose_next = c.kinematic ? pose_at(c, t + dt, next) : f.pose;
+  f.tr = bt(f.pose);
+  c.shape->getAabb(f.tr, f.lo, f.hi);
   // The box grown by what a sample can cover relative to the shape in a step: the search depth several times over
   // and twice the shape's own step (m).
-  const double grow = 4.0 * depth + 2.0 * (pose_next.position - pose.position).norm();
-  const Vec3 near_lo = from_bt(lo) - Vec3::Constant(grow), near_hi = from_bt(hi) + Vec3::Constant(grow);
-  const int n = samples.size();
+  const double grow = 4.0 * depth + 2.0 * (f.pose_next.position - f.pose.position).norm();
+  f.near_lo = from_bt(f.lo) - Vec3::Constant(grow);
+  f.near_hi = from_bt(f.hi) + Vec3::Constant(grow);
   if (c.cache_local.size() != std::size_t(n)) {
     c.cache_local.assign(std::size_t(n), Vec3::Zero());
     c.cache_clearance.assign(std::size_t(n), -1.0);
     c.last_depth.assign(std::size_t(n), 0.0);
     c.certificate.assign(c.concave ? std::size_t(n) : 0, NearestCertificate{});
   }
-  const btVector3 com = c.dynamic ? c.body->getCenterOfMassPosition() : btVector3(0, 0, 0);
-  const bool parallel = executor != nullptr && executor->threads() > 1;
-  // First the samples that need a query: inside Bullet's bounding box of the shape and not within the clearance known
-  // from their last query in the collider's frame (cheap tests, in chunks, joined in sample order).
-  constexpr int kScan = 1024;
-  const int scans = (n + kScan - 1) / kScan;
-  std::vector<std::vector<int>> scanned(static_cast<std::size_t>(scans));
-  const auto scan = [&](int sb, int se) {
-    for (int s = sb; s < se; ++s) {
-      for (int i = s * kScan; i < std::min(n, (s + 1) * kScan); ++i) {
-        const Vec3& p = positions[std::size_t(i)];
-        if (p.x() < lo.x() || p.y() < lo.y() || p.z() < lo.z() || p.x() > hi.x() || p.y() > hi.y() ||
-            p.z() > hi.z()) {
-          // Outside the shape's box but near it, and not seen yet: remembered as outside there (in the collider's
-          // frame), at least its distance from the box away from the surface, so that a sample that enters the mesh
-          // deeper than the search depth within one step is found (see the queries).
-          if (c.concave && c.cache_clearance[std::size_t(i)] < 0.0 && p.x() >= near_lo.x() && p.y() >= near_lo.y() &&
-              p.z() >= near_lo.z() && p.x() <= near_hi.x() && p.y() <= near_hi.y() && p.z() <= near_hi.z()) {
-            const Vec3 gap = (from_bt(lo) - p).cwiseMax(p - from_bt(hi)).cwiseMax(0.0);
-            c.cache_local[std::size_t(i)] = pose.rotation.transpose() * (p - pose.position);
-            c.cache_clearance[std::size_t(i)] = gap.norm();
-            c.last_depth[std::size_t(i)] = 0.0;
-          }
-          continue;
-        }
-        const Vec3 local = pose.rotation.transpose() * (p - pose.position);
-        const double clearance = c.cache_clearance[std::size_t(i)];
-        if (clearance > 0.0 && (local - c.cache_local[std::size_t(i)]).norm() < clearance) continue;
-        scanned[std::size_t(s)].push_back(i);
+  f.com = c.dynamic ? c.body->getCenterOfMassPosition() : btVector3(0, 0, 0);
+  return f;
+}
+
+void ContactWorld::Impl::scan(std::size_t ci, const QueryFrame& f, const std::vector<Vec3>& positions, int b, int e,
+                              std::vector<int>& out) {
+  Collider& c = colliders[ci];
+  const btVector3 &lo = f.lo, &hi = f.hi;
+  for (int i = b; i < e; ++i) {
+    const Vec3& p = positions[std::size_t(i)];
+    if (p.x() < lo.x() || p.y() < lo.y() || p.z() < lo.z() || p.x() > hi.x() || p.y() > hi.y() || p.z() > hi.z()) {
+      // Outside the shape's box but near it, and not seen yet: remembered as outside there (in the collider's
+      // frame), at least its distance from the box away from the surface, so that a sample that enters the mesh
+      // deeper than the search depth within one step is found (see query_sample).
+      if (c.concave && c.cache_clearance[std::size_t(i)] < 0.0 && p.x() >= f.near_lo.x() && p.y() >= f.near_lo.y() &&
+          p.z() >= f.near_lo.z() && p.x() <= f.near_hi.x() && p.y() <= f.near_hi.y() && p.z() <= f.near_hi.z()) {
+        const Vec3 gap = (from_bt(lo) - p).cwiseMax(p - from_bt(hi)).cwiseMax(0.0);
+        c.cache_local[std::size_t(i)] = f.pose.rotation.transpose() * (p - f.pose.position);
+        c.cache_clearance[std::size_t(i)] = gap.norm();
+        c.last_depth[std::size_t(i)] = 0.0;
       }
+      continue;
     }
-  };
-  if (parallel && scans > 1)
-    executor->parallel_for(scans, 1, scan);
-  else
-    scan(0, scans);
-  std::vector<int> queried;  // ascending
-  for (const std::vector<int>& s : scanned) queried.insert(queried.end(), s.begin(), s.end());
-  // Then the queries, in small chunks, in parallel when an executor is given (the samples near a tool are few and
-  // close together in S's order, and each query can cost tens of microseconds): each sample reads and writes only its
-  // own cache entries, and Bullet's queries on a shape are read-only. The chunks' contacts are joined in sample order,
-  // so the result does not depend on the threads.
-  constexpr int kChunk = 8;
-  const int chunks = (int(queried.size()) + kChunk - 1) / kChunk;
-  struct Found {
-    std::vector<sim::Contact> contacts;
-    std::vector<ContactRef> refs;
-    double max_penetration = 0.0;
-    long searched = 0, certified = 0;
-  };
-  std::vector<Found> found(static_cast<std::size_t>(chunks));
-  const auto run = [&](int cb, int ce) {
-    for (int chunk = cb; chunk < ce; ++chunk) {
-      Found& f = found[std::size_t(chunk)];
-      for (int q = chunk * kChunk; q < std::min(int(queried.size()), (chunk + 1) * kChunk); ++q) {
-        const int i = queried[std::size_t(q)];
-        const Vec3& p = positions[std::size_t(i)];
-        const Vec3 local = pose.rotation.transpose() * (p - pose.position);
-        Vec3 normal = Vec3::UnitZ();
-        double& last = c.last_depth[std::size_t(i)];
-        bool certified = false;
-        NearestCertificate* certificate = c.concave ? &c.certificate[std::size_t(i)] : nullptr;
-        double& clearance = c.cache_clearance[std::size_t(i)];
-        const bool was_outside = last == 0.0 && clearance >= 0.0;  // at its last query, at cache_local
-        const double was_clear = clearance;                          // m, free of the surface around cache_local
-        double d = tracked_distance(c, tr, p, depth, last, normal, clearance, certificate, certified);
-        ++(certified ? f.certified : f.searched);
-        const double searched = std::max(depth, 2.0 * last);  // m, the largest box tracked_distance searched
-        if (c.concave && d >= searched && (last > 0.0 || was_outside)) {
-          // Nothing within the box searched, for a sample that was inside (it went deeper than twice its depth in a
-          // step), or that was outside and went through the surface since (then it may be inside, deeper than the
-          // search looks): its nearest triangle, wherever it is, decides, by the side of its face the sample is on,
-          // as for every sample (not the crossings' parity, which a segment through an edge miscounts). A segment
-          // that starts was_clear away from the surface and ends `depth` away from it can reach the surface only if
-          // it is at least as long as both together.
-          bool through = last > 0.0;
-          if (!through && (local - c.cache_local[std::size_t(i)]).norm() >= was_clear + depth) {
-            SurfaceCrossings crossings(bt(c.cache_local[std::size_t(i)]), bt(local));
-            c.concave->performRaycast(&crossings, crossings.m_from, crossings.m_to);
-            through = crossings.count > 0;
-          }
-          if (through) d = nearest_anywhere(c, tr, p, 2.0 * searched, normal, clearance, certificate);
-        }
-        c.cache_local[std::size_t(i)] = local;
-        last = d < 0.0 ? -d : 0.0;
-        if (!(d < 0.0)) continue;
-        sim::Contact k;
-        k.dofs.assign(samples.dofs.begin() + samples.begin[std::size_t(i)],
-                      samples.dofs.begin() + samples.begin[std::size_t(i) + 1]);
-        k.normal = normal;
-        k.penetration = -d;
-        k.stiffness = stiffness * samples.area[std::size_t(i)];
-        k.damping = scene.contact.damping * k.stiffness;
-        k.friction = c.friction;
-        if (c.dynamic) k.rigid_velocity = from_bt(c.body->getVelocityInLocalPoint(bt(p) - com));
-        else if (c.kinematic && dt > 0.0) k.rigid_velocity = (pose_next.apply(local) - p) / dt;
-        f.max_penetration = std::max(f.max_penetration, -d);
-        f.contacts.push_back(std::move(k));
-        f.refs.push_back({ci, p});
-      }
-    }
-  };
-  if (parallel && chunks > 1)
-    executor->parallel_for(chunks, 1, run);
-  else
-    run(0, chunks);
-  for (Found& f : found) {
-    profile.searched += f.searched;
-    profile.certified += f.certified;
-    c.state.max_penetration = std::max(c.state.max_penetration, f.max_penetration);
-    std::move(f.contacts.begin(), f.contacts.end(), std::back_inserter(out));
-    refs.insert(refs.end(), f.refs.begin(), f.refs.end());
+    const Vec3 local = f.pose.rotation.transpose() * (p - f.pose.position);
+    const double clearance = c.cache_clearance[std::size_t(i)];
+    if (clearance > 0.0 && (local - c.cache_local[std::size_t(i)]).norm() < clearance) continue;
+    out.push_back(i);
   }
 }
 
+void ContactWorld::Impl::query_sample(std::size_t ci, const QueryFrame& f, const sim::ContactSamples& samples,
+                                      const std::vector<Vec3>& positions, int i, double dt, Found& found) {
+  Collider& c = colliders[ci];
+  const Vec3& p = positions[std::size_t(i)];
+  const Vec3 local = f.pose.rotation.transpose() * (p - f.pose.position);
+  Vec3 normal = Vec3::UnitZ();
+  double& last = c.last_depth[std::size_t(i)];
+  bool certified = false;
+  NearestCertificate* certificate = c.concave ? &c.certificate[std::size_t(i)] : nullptr;
+  double& clearance = c.cache_clearance[std::size_t(i)];
+  const bool was_outside = last == 0.0 && clearance >= 0.0;  // at its last query, at cache_local
+  const double was_clear = clearance;                          // m, free of the surface around cache_local
+  double d = tracked_distance(c, f.tr, p, depth, last, normal, clearance, certificate, certified);
+  ++(certified ? found.certified : found.searched);
+  const double searched = std::max(depth, 2.0 * last);  // m, the largest box tracked_distance searched
+  if (c.concave && d >= searched && (last > 0.0 || was_outside)) {
+    // Nothing within the box searched, for a sample that was inside (it went deeper than twice its depth in a
+    // step), or that was outside and went through the surface since (then it may be inside, deeper than the
+    // search looks): its nearest triangle, wherever it is, decides, by the side of its face the sample is on,
+    // as for every sample (not the crossings' parity, which a segment through an edge miscounts). A segment
+    // that starts was_clear away from the surface and ends `depth` away from it can reach the surface only if
+    // it is at least as long as both together.
+    bool through = last > 0.0;
+    if (!through && (local - c.cache_local[std::size_t(i)]).norm() >= was_clear + depth) {
+      SurfaceCrossings crossings(bt(c.cache_local[std::size_t(i)]), bt(local));
+      c.concave->performRaycast(&crossings, crossings.m_from, crossings.m_to);
+      through = crossings.count > 0;
+    }
+    if (through) d = nearest_anywhere(c, f.tr, p, 2.0 * searched, normal, clearance, certificate);
+  }
+  c.cache_local[std::size_t(i)] = local;
+  last = d < 0.0 ? -d : 0.0;
+  if (!(d < 0.0)) return;
+  sim::Contact k;
+  k.dofs.assign(samples.dofs.begin() + samples.begin[std::size_t(i)],
+                samples.dofs.begin() + samples.begin[std::size_t(i) + 1]);
+  k.normal = normal;
+  k.penetration = -d;
+  k.stiffness = stiffness * samples.area[std::size_t(i)];
+  k.damping = scene.contact.damping * k.stiffness;
+  k.friction = c.friction;
+  if (c.dynamic) k.rigid_velocity = from_bt(c.body->getVelocityInLocalPoint(bt(p) - f.com));
+  else if (c.kinematic && dt > 0.0) k.rigid_velocity = (f.pose_next.apply(local) - p) / dt;
+  found.max_penetration = std::max(found.max_penetration, -d);
+  found.contacts.push_back(std::move(k));
+  found.refs.push_back({ci, p});
+}
+
+// Two passes over the samples for all colliders at once, each on the executor's threads when given (two fork-joins
+// per step, not two per collider and one for the positions; meniscus_punch has four colliders):
+//  1. in chunks of kScan samples: their positions, then for each collider the ones that need a query (inside
+//     Bullet's bounding box of the shape and not within the clearance known from their last query, in the collider's
+//     frame: cheap tests);
+//  2. the queries, in small chunks of kChunk samples of one collider (the samples near a tool are few and close
+//     together in S's order, and each query can cost tens of microseconds).
+// Each (collider, sample) pair's cache entries are read and written by one chunk only, and Bullet's queries on a
+// shape are read-only. The chunks' contacts are joined in collider order, then sample order, so the result does not
+// depend on the threads.
 std::vector<sim::Contact> ContactWorld::find(const sim::ContactSamples& samples, const std::vector<Vec3>& x,
                                              double t, double dt,
                                              const std::vector<sim::Pose>& tool_now,
@@ -652,23 +647,71 @@ std::vector<sim::Contact> ContactWorld::find(const sim::ContactSamples& samples,
   const auto t0 = sim::Clock::now();
   if (std::size_t(samples.size()) != m->samples) reset_samples();
   m->samples = std::size_t(samples.size());
-  // The samples' positions once for all colliders (on the executor's threads: each writes its own entries).
   const int n = samples.size();
+  const std::size_t nc = m->colliders.size();
+  const bool parallel = executor != nullptr && executor->threads() > 1;
+  std::vector<Impl::QueryFrame> frames;
+  frames.reserve(nc);
+  for (std::size_t ci = 0; ci < nc; ++ci) frames.push_back(m->frame_of(ci, n, t, dt, tool_now, tool_next));
+
+  constexpr int kScan = 1024;
+  const int scans = (n + kScan - 1) / kScan;
   std::vector<Vec3> positions(std::size_t(n), Vec3::Zero());
-  const auto place = [&](int b, int e) {
-    for (int i = b; i < e; ++i) positions[std::size_t(i)] = samples.position(i, x);
+  std::vector<std::vector<int>> scanned(nc * std::size_t(scans));  // [collider * scans + scan]: samples to query
+  const auto place_and_scan = [&](int sb, int se) {
+    for (int s = sb; s < se; ++s) {
+      const int b = s * kScan, e = std::min(n, b + kScan);
+      for (int i = b; i < e; ++i) positions[std::size_t(i)] = samples.position(i, x);
+      for (std::size_t ci = 0; ci < nc; ++ci)
+        m->scan(ci, frames[ci], positions, b, e, scanned[ci * std::size_t(scans) + std::size_t(s)]);
+    }
   };
-  if (executor != nullptr && executor->threads() > 1 && n > 1024)
-    executor->parallel_for(n, 1024, place);
+  if (parallel && scans > 1)
+    executor->parallel_for(scans, 1, place_and_scan);
   else
-    place(0, n);
+    place_and_scan(0, scans);
+
+  // The queries: task k is chunk k - first[ci] of collider ci's samples to query (ascending).
+  constexpr int kChunk = 8;
+  std::vector<std::vector<int>> queried(nc);
+  std::vector<int> first(nc + 1, 0);
+  for (std::size_t ci = 0; ci < nc; ++ci) {
+    for (int s = 0; s < scans; ++s) {
+      const std::vector<int>& part = scanned[ci * std::size_t(scans) + std::size_t(s)];
+      queried[ci].insert(queried[ci].end(), part.begin(), part.end());
+    }
+    first[ci + 1] = first[ci] + (int(queried[ci].size()) + kChunk - 1) / kChunk;
+  }
+  std::vector<Impl::Found> found(static_cast<std::size_t>(first[nc]));
+  const auto run = [&](int kb, int ke) {
+    for (int k = kb; k < ke; ++k) {
+      const auto ci = std::size_t(std::upper_bound(first.begin(), first.end(), k) - first.begin() - 1);
+      const std::vector<int>& q = queried[ci];
+      const int b = (k - first[ci]) * kChunk, e = std::min(int(q.size()), b + kChunk);
+      for (int j = b; j < e; ++j)
+        m->query_sample(ci, frames[ci], samples, positions, q[std::size_t(j)], dt, found[std::size_t(k)]);
+    }
+  };
+  if (parallel && first[nc] > 1)
+    executor->parallel_for(first[nc], 1, run);
+  else
+    run(0, first[nc]);
+
   std::vector<sim::Contact> out;
   m->refs.clear();
   m->profile.searched = m->profile.certified = 0;
-  for (std::size_t ci = 0; ci < m->colliders.size(); ++ci) {
-    m->colliders[ci].state.max_penetration = 0.0;
-    m->query(ci, samples, positions, t, dt, tool_now, tool_next, executor, out);
-    m->max_penetration = std::max(m->max_penetration, m->colliders[ci].state.max_penetration);
+  for (std::size_t ci = 0; ci < nc; ++ci) {
+    Collider& c = m->colliders[ci];
+    c.state.max_penetration = 0.0;
+    for (int k = first[ci]; k < first[ci + 1]; ++k) {
+      Impl::Found& f = found[std::size_t(k)];
+      m->profile.searched += f.searched;
+      m->profile.certified += f.certified;
+      c.state.max_penetration = std::max(c.state.max_penetration, f.max_penetration);
+      std::move(f.contacts.begin(), f.contacts.end(), std::back_inserter(out));
+      m->refs.insert(m->refs.end(), f.refs.begin(), f.refs.end());
+    }
+    m->max_penetration = std::max(m->max_penetration, c.state.max_penetration);
   }
   m->profile.queries = sim::ms_since(t0);
   return out;

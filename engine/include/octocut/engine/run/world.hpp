@@ -152,7 +152,9 @@ class World {
   [[nodiscard]] const sim::Simulator& simulator() const;
   /// The rest surface S now (after the cuts so far), m. Its only copy in the world.
   [[nodiscard]] const sim::TriMesh& rest_surface() const;
-  /// The deformed positions of S's vertices after the last step (|V|, m); empty once the object is cut away.
+  /// The deformed positions of S's vertices after the last step (|V|, m); empty once the object is cut away. Computed
+  /// at the first call after a step or a cut (steps do not compute it), so, like step(), not to be called from
+  /// another thread while one runs.
   [[nodiscard]] const std::vector<sim::Vec3>& deformed_vertices() const;
   /// S deformed, for writing (positions of deformed_vertices(), triangles of rest_surface()).
   [[nodiscard]] sim::TriMesh deformed_surface() const;

@@ -19,6 +19,8 @@
 #include "octocut/engine/io/mesh_io.hpp"
 #include "octocut/engine/run/run.hpp"
 #include "octocut/engine/scene/scene_loader.hpp"
+#include "octocut/sim/embedding.hpp"
+#include "octocut/sim/parallel.hpp"
 #include "octocut/sim/primitives.hpp"
 
 namespace octocut::engine {
@@ -352,6 +354,37 @@ TEST_F(WorldTest, MaterialEditsApplyFromNowOnAndBadOnesChangeNothing) {
   EXPECT_EQ(world.material().element, "bbar");
   EXPECT_EQ(world.material().poisson_ratio, 0.45);
   EXPECT_EQ(world.simulator().model().params().poisson_ratio, 0.45);
+}
+
+// The deformed surface is computed when asked, not at every step: whenever it is asked for, after steps and after a
+// cut that changed S, it is the embedding of S's current rest vertices in the current model at the current state (a
+// fresh embedding computes the reference), not a copy from an earlier step.
+TEST_F(WorldTest, DeformedSurfaceFollowsTheStateWhenAskedAfterStepsAndACut) {
+  World world(scene(kCube, {"/solver/gravity=[0, 0, -9.81]"}), WorldOptions{.render = false});
+  const auto expected = [&] {
+    const sim::SurfaceEmbedding fresh(world.simulator().model(), world.rest_surface());
+    sim::Executor one(1);
+    std::vector<Vec3> p;
+    fresh.deformed_positions(world.simulator().state().x, p, one);
+    return p;
+  };
+  world.step();
+  world.step();
+  const std::vector<Vec3> early = world.deformed_vertices();
+  EXPECT_EQ(early, expected());
+  world.step();  // the cube sags under gravity: the surface asked for again has moved
+  const std::vector<Vec3> next = world.deformed_vertices();
+  EXPECT_NE(next, early);
+  EXPECT_EQ(next, expected());
+  const std::size_t vertices_before = world.rest_surface().num_vertices();
+  while (!world.done()) world.step();  // the punch at 5 ms changes S
+  ASSERT_EQ(world.report().cuts.size(), 1u);
+  ASSERT_EQ(world.report().cuts[0].status, "ok");
+  ASSERT_NE(world.rest_surface().num_vertices(), vertices_before);
+  const std::vector<Vec3> late = world.deformed_vertices();
+  ASSERT_EQ(late.size(), world.rest_surface().num_vertices());
+  EXPECT_EQ(late, expected());
+  EXPECT_EQ(world.deformed_surface().vertices, late);
 }
 
 TEST_F(WorldTest, AnObjectCutAwayEntirelyKeepsTimeRunning) {

@@ -134,7 +134,7 @@ struct World::Impl {
   void bind_surface();
   void check_start();
   void ensure_blade(std::size_t tool);
-  void update_surface();
+  void surface_changed();
   const std::vector<sim::Vec3>& surface_now();
   void build_contact();
   void load_body_meshes();
@@ -348,7 +348,7 @@ void World::Impl::bind_surface() {
   if (embedding->num_fallback() > 0)
     warnings.push_back(std::to_string(embedding->num_fallback()) +
                        " surface vertices lie outside every leaf and are bound to the nearest one");
-  update_surface();
+  surface_changed();
   if (!rendering) return;
   if (!m0.material_graph()) {
     const sim::Box3 box = to_box3(scene.object.surface_box);
@@ -358,8 +358,8 @@ void World::Impl::bind_surface() {
 }
 
 // The state or S changed: the deformed surface is computed again when someone asks for it (surface_now), not at
-// every step. A run without frames or surface outputs never needs it (meniscus_punch: 0.06-0.1 ms of a 4 ms step).
-void World::Impl::update_surface() {
+// every step. A run without frames or surface outputs never needs it (meniscus_punch: 0.06-0.08 ms of a 3-4 ms step).
+void World::Impl::surface_changed() {
   deformed_stale = true;
   if (sim->empty()) deformed.clear();
 }
@@ -426,7 +426,7 @@ CutSummary World::Impl::cut(std::size_t i, double t, bool scheduled) {
                        std::to_string(o.unrestricted) + " component(s)): it cut all of it");
   if (o.status == "ok") {
     ++surface_revision;
-    update_surface();
+    surface_changed();
     refresh_samples();  // the new cut faces collide
   }
   return c;
@@ -548,7 +548,7 @@ StepResult World::step() {
   m->contact_before_step();
   m->sim->step();  // an object cut away entirely only advances time (sim::Simulator::remove_object)
   m->contact_after_step();
-  m->update_surface();
+  m->surface_changed();
   // The first step after a cut is part of what the cut costs the user (the solver may rebuild after it).
   const double sim_ms = sim::ms_since(sim0);
   for (auto& [c, left] : m->settling) {

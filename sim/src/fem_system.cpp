@@ -1,6 +1,7 @@
 #include "octocut/sim/fem_system.hpp"
 
 #include <algorithm>
+#include <span>
 
 #include "element_kernels.hpp"
 #include "octocut/sim/parallel.hpp"
@@ -16,6 +17,17 @@ struct GatherEntry {
   int corner;
   int dof;
   double w;
+};
+
+// Every element's gather list, in one array (the element loops walk them in order, with no pointer to follow per
+// element): element e's entries are entries[begin[e] .. begin[e + 1]).
+struct GatherLists {
+  std::vector<GatherEntry> entries;
+  std::vector<int> begin{0};  ///< num_elements + 1
+  [[nodiscard]] std::size_t size() const { return begin.size() - 1; }
+  [[nodiscard]] std::span<const GatherEntry> operator[](std::size_t e) const {
+    return {entries.data() + begin[e], entries.data() + begin[e + 1]};
+  }
 };
 
 // Positions of an element's 8 slots as a 24-vector and as a 3 x 8 matrix.
@@ -38,13 +50,12 @@ struct BlockPattern {
 
 // The free DOFs each element couples (elem_ptr, elem_dof), and how many elements couple each DOF, as the prefix
 // sums dof_ptr (num_dofs + 1).
-void element_free_dofs(const std::vector<std::vector<GatherEntry>>& gather, const std::vector<char>& constrained,
+void element_free_dofs(const GatherLists& gather, const std::vector<char>& constrained,
                        int nd, BlockPattern& bp, std::vector<int>& dof_ptr) {
   const int ne = int(gather.size());
   bp.elem_ptr.assign(std::size_t(ne) + 1, 0);
   bp.elem_dof.clear();
-  std::size_t gathered = 0;
-  for (const auto& g : gather) gathered += g.size();
+  const std::size_t gathered = gather.entries.size();
   bp.elem_dof.reserve(gathered);
   dof_ptr.assign(std::size_t(nd) + 1, 0);
   for (int e = 0; e < ne; ++e) {
@@ -61,7 +72,7 @@ void element_free_dofs(const std::vector<std::vector<GatherEntry>>& gather, cons
 }
 
 // The block structure for the gather lists (num_elements) and the constrained flags (num_dofs).
-BlockPattern block_pattern(const std::vector<std::vector<GatherEntry>>& gather, const std::vector<char>& constrained,
+BlockPattern block_pattern(const GatherLists& gather, const std::vector<char>& constrained,
                            int nd) {
   BlockPattern bp;
   std::vector<int> dof_ptr;
@@ -105,7 +116,7 @@ struct FemSystem::Impl {
   const ObjectModel* model_ptr;  // the model this system was built for (the simulator's, or a prepared one's)
   const ObjectModel& model() const { return *model_ptr; }
   Executor* executor_ptr;  // runs the element loops (the simulator's, or a serial one while prepared)
-  std::vector<std::vector<GatherEntry>> gather;  // per element: its slots' rows of P (num_elements)
+  GatherLists gather;  // per element: its slots' rows of P (num_elements)
   std::vector<Vec24> rest;                        // rest slot positions per element, m (num_elements)
 
   // Fixed sparse pattern of the system matrix, built on the first assemble_system call.
@@ -128,8 +139,7 @@ struct FemSystem::Impl {
     const int nd = model().num_dofs();
     if (int(dof_element_ptr.size()) == nd + 1) return;
     std::vector<int> ptr(std::size_t(nd) + 1, 0);
-    for (const auto& g : gather)
-      for (const GatherEntry& p : g) ++ptr[std::size_t(p.dof) + 1];
+    for (const GatherEntry& p : gather.entries) ++ptr[std::size_t(p.dof) + 1];
     for (int d = 0; d < nd; ++d) ptr[std::size_t(d) + 1] += ptr[std::size_t(d)];
     dof_element.assign(std::size_t(ptr.back()), 0);
     std::vector<int> fill(ptr.begin(), ptr.end() - 1);
@@ -269,15 +279,17 @@ struct FemSystem::Impl {
   Impl(const ObjectModel& m, Executor& ex) : model_ptr(&m), executor_ptr(&ex) {
     const DofMap& dm = m.dofs();
     const int ne = m.num_elements();
-    gather.resize(std::size_t(ne));
+    gather.begin.reserve(std::size_t(ne) + 1);
+    gather.entries.reserve(dm.slot_begin.empty() ? 0 : std::size_t(dm.slot_begin.back()));
     rest.resize(std::size_t(ne));
     for (int e = 0; e < ne; ++e) {
       for (int a = 0; a < 8; ++a) {
         const int s = 8 * e + a;
         for (int i = dm.slot_begin[std::size_t(s)]; i < dm.slot_begin[std::size_t(s) + 1]; ++i)
-          gather[std::size_t(e)].push_back({a, dm.slot_dof[std::size_t(i)], dm.slot_weight[std::size_t(i)]});
+          gather.entries.push_back({a, dm.slot_dof[std::size_t(i)], dm.slot_weight[std::size_t(i)]});
         rest[std::size_t(e)].segment<3>(3 * a) = m.slot_rest()[std::size_t(s)];
       }
+      gather.begin.push_back(int(gather.entries.size()));
     }
   }
 
@@ -578,36 +590,46 @@ void FemSystem::system_product(double mc, double kc, const ElementFrame& frame, 
   Impl& im = *m_impl;
   const ObjectModel& m = im.model();
   const int nd = m.num_dofs();
-  y.setZero(3 * nd);
-  if (nd == 0) return;
-  // Stiffness by parts of the rows, in parallel (as the assembly's scatter); then the lumped mass, and identity
-  // rows for the constrained DOFs.
+  // Each DOF's row: zero, the stiffness's terms in element order, then the lumped mass (or the identity for a
+  // constrained DOF), by parts of the rows, in parallel (as the assembly's scatter).
+  const auto finish_rows = [&](int lo, int hi) {
+    for (int d = lo; d < hi; ++d) {
+      if (constrained[std::size_t(d)])
+        y.segment<3>(3 * d) = x.segment<3>(3 * d);
+      else
+        y.segment<3>(3 * d) += (mc * m.dof_mass()[std::size_t(d)]) * x.segment<3>(3 * d);
+    }
+  };
+  if (nd == 0) {
+    y.resize(0);
+    return;
+  }
   const int parts = im.ensure_parts();
   if (parts == 1) {
+    y.setZero(3 * nd);
     im.product_part(im.part_elements[0], 0, nd, kc, frame, constrained, x, y);
-  } else {
-    // With several parts, each element's product is computed once, on elements split evenly between the threads,
-    // and the parts then add them up: a part's elements include those it shares with its neighbours (23 % of the
-    // meniscus's), whose products the fused loop computed twice. The sums are product_part's, in its order.
-    thread_local std::vector<Vec24> buffer;  // this thread's calls' (a lambda names the running thread's own)
-    std::vector<Vec24>& ke = buffer;         // kc R K R^T x~ per element (num_elements)
-    const int ne = m.num_elements();
-    ke.resize(std::size_t(ne));
-    im.executor_ptr->parallel_for(ne, kGrain, [&](int b, int en) {
-      for (int e = b; e < en; ++e) ke[std::size_t(e)] = im.element_product(e, kc, frame, constrained, false, x);
-    });
-    im.executor_ptr->parallel_for(parts, 1, [&](int tb, int te) {
-      for (int t = tb; t < te; ++t)
-        im.add_products(im.part_elements[std::size_t(t)], im.part_dof[std::size_t(t)],
-                        im.part_dof[std::size_t(t) + 1], constrained, ke, y);
-    });
+    finish_rows(0, nd);
+    return;
   }
-  for (int d = 0; d < nd; ++d) {
-    if (constrained[std::size_t(d)])
-      y.segment<3>(3 * d) = x.segment<3>(3 * d);
-    else
-      y.segment<3>(3 * d) += (mc * m.dof_mass()[std::size_t(d)]) * x.segment<3>(3 * d);
-  }
+  // With several parts, each element's product is computed once, on elements split evenly between the threads,
+  // and the parts then add them up: a part's elements include those it shares with its neighbours (23 % of the
+  // meniscus's), whose products the fused loop computed twice. The sums are product_part's, in its order.
+  thread_local std::vector<Vec24> buffer;  // this thread's calls' (a lambda names the running thread's own)
+  std::vector<Vec24>& ke = buffer;         // kc R K R^T x~ per element (num_elements)
+  const int ne = m.num_elements();
+  ke.resize(std::size_t(ne));
+  y.resize(3 * nd);
+  im.executor_ptr->parallel_for(ne, kGrain, [&](int b, int en) {
+    for (int e = b; e < en; ++e) ke[std::size_t(e)] = im.element_product(e, kc, frame, constrained, false, x);
+  });
+  im.executor_ptr->parallel_for(parts, 1, [&](int tb, int te) {
+    for (int t = tb; t < te; ++t) {
+      const int lo = im.part_dof[std::size_t(t)], hi = im.part_dof[std::size_t(t) + 1];
+      y.segment(3 * lo, 3 * (hi - lo)).setZero();
+      im.add_products(im.part_elements[std::size_t(t)], lo, hi, constrained, ke, y);
+      finish_rows(lo, hi);
+    }
+  });
 }
 
 void FemSystem::system_coupling(double kc, const ElementFrame& frame, const std::vector<char>& constrained,

@@ -220,21 +220,26 @@ struct FemSystem::Impl {
   // entries of unconstrained DOFs (want_constrained false) or only those of constrained ones (true) (24).
   Vec24 element_product(int e, double kc, const ElementFrame& frame, const std::vector<char>& constrained,
                         bool want_constrained, const VecX& x) const {
-    Vec24 local = Vec24::Zero();
-    for (const GatherEntry& g : gather[std::size_t(e)])
-      if (bool(constrained[std::size_t(g.dof)]) == want_constrained)
-        local.segment<3>(3 * g.corner) += g.w * x.segment<3>(3 * g.dof);
+    // Each corner's entries follow one another, corners ascending (the constructor): summed in registers.
+    Vec24 local;
+    const std::span<const GatherEntry> g = gather[std::size_t(e)];
+    std::size_t k = 0;
+    for (int a = 0; a < 8; ++a) {
+      Vec3 sum = Vec3::Zero();
+      for (; k < g.size() && g[k].corner == a; ++k)
+        if (bool(constrained[std::size_t(g[k].dof)]) == want_constrained) sum += g[k].w * x.segment<3>(3 * g[k].dof);
+      local.segment<3>(3 * a) = sum;
+    }
     return rotated_apply(e, kc, frame.rotation[std::size_t(e)], local);
   }
 
   // kc R K R^T v for element e's slot vector v (24), applied block-wise without forming R K R^T.
-  Vec24 rotated_apply(int e, double kc, const Mat3& R, Vec24 v) const {
-    for (int a = 0; a < 8; ++a) v.segment<3>(3 * a) = R.transpose() * v.segment<3>(3 * a);
-    Vec24 kv;
-    apply_stiffness24(model().unit_stiffness().data(), v.data(), kv.data());
-    const Vec24 kl = (kc * model().stiffness_scale()[std::size_t(e)]) * kv;
-    Vec24 out;
-    for (int a = 0; a < 8; ++a) out.segment<3>(3 * a) = R * kl.segment<3>(3 * a);
+  Vec24 rotated_apply(int e, double kc, const Mat3& R, const Vec24& v) const {
+    Vec24 rv, kv, out;
+    for (int a = 0; a < 8; ++a) rv.segment<3>(3 * a).noalias() = R.transpose() * v.segment<3>(3 * a);
+    apply_stiffness24(model().unit_stiffness().data(), rv.data(), kv.data());
+    kv *= kc * model().stiffness_scale()[std::size_t(e)];
+    for (int a = 0; a < 8; ++a) out.segment<3>(3 * a).noalias() = R * kv.segment<3>(3 * a);
     return out;
   }
 

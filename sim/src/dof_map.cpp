@@ -466,7 +466,11 @@ std::string DofMap::check_invariants() const {
 
 void DofMap::prolong(const std::vector<Vec3>& dofs, std::vector<Vec3>& slots) const {
   slots.resize(std::size_t(num_slots()));
-  for (int s = 0; s < num_slots(); ++s) {
+  prolong_range(dofs, slots, 0, num_slots());
+}
+
+void DofMap::prolong_range(const std::vector<Vec3>& dofs, std::vector<Vec3>& slots, int begin, int end) const {
+  for (int s = begin; s < end; ++s) {
     Vec3 p = Vec3::Zero();
     for (int i = slot_begin[std::size_t(s)]; i < slot_begin[std::size_t(s) + 1]; ++i)
       p += slot_weight[std::size_t(i)] * dofs[std::size_t(slot_dof[std::size_t(i)])];

@@ -220,17 +220,7 @@ struct FemSystem::Impl {
   // entries of unconstrained DOFs (want_constrained false) or only those of constrained ones (true) (24).
   Vec24 element_product(int e, double kc, const ElementFrame& frame, const std::vector<char>& constrained,
                         bool want_constrained, const VecX& x) const {
-    // Each corner's entries follow one another, corners ascending (the constructor): summed in registers.
-    Vec24 local;
-    const std::span<const GatherEntry> g = gather[std::size_t(e)];
-    std::size_t k = 0;
-    for (int a = 0; a < 8; ++a) {
-      Vec3 sum = Vec3::Zero();
-      for (; k < g.size() && g[k].corner == a; ++k)
-        if (bool(constrained[std::size_t(g[k].dof)]) == want_constrained) sum += g[k].w * x.segment<3>(3 * g[k].dof);
-      local.segment<3>(3 * a) = sum;
-    }
-    return rotated_apply(e, kc, frame.rotation[std::size_t(e)], local);
+    return rotated_apply(e, kc, frame.rotation[std::size_t(e)], element_vector(e, x, &constrained, want_constrained));
   }
 
   // kc R K R^T v for element e's slot vector v (24), applied block-wise without forming R K R^T.
@@ -300,17 +290,38 @@ struct FemSystem::Impl {
 
   Mat24 element_k(int e) const { return model().stiffness_scale()[std::size_t(e)] * model().unit_stiffness(); }
 
-  // Adds the element vectors (num_elements x 24) into a DOF vector through P^T, in a fixed order.
-  void gather_vectors(const std::vector<Vec24>& fe, VecX& f) const {
-    f.setZero(3 * model().num_dofs());
-    for (std::size_t e = 0; e < gather.size(); ++e)
-      for (const GatherEntry& g : gather[e]) f.segment<3>(3 * g.dof) += g.w * fe[e].segment<3>(3 * g.corner);
+  // Adds the element vectors (num_elements x 24) into a DOF vector through P^T: each DOF's sum in element order, by
+  // parts of the DOFs in parallel (see part_dof), so the sums do not depend on the parts.
+  void gather_vectors(const std::vector<Vec24>& fe, VecX& f) {
+    const int nd = model().num_dofs();
+    f.resize(3 * nd);
+    const int parts = ensure_parts();
+    executor_ptr->parallel_for(parts, 1, [&](int tb, int te) {
+      for (int t = tb; t < te; ++t) {
+        const int lo = part_dof[std::size_t(t)], hi = part_dof[std::size_t(t) + 1];
+        f.segment(3 * lo, 3 * (hi - lo)).setZero();
+        for (const int e : part_elements[std::size_t(t)])
+          for (const GatherEntry& g : gather[std::size_t(e)])
+            if (g.dof >= lo && g.dof < hi) f.segment<3>(3 * g.dof) += g.w * fe[std::size_t(e)].segment<3>(3 * g.corner);
+      }
+    });
   }
 
-  // Scatters a DOF vector to element slots: v_e = (P v) restricted to element e.
-  Vec24 element_vector(int e, const VecX& v) const {
-    Vec24 out = Vec24::Zero();
-    for (const GatherEntry& g : gather[std::size_t(e)]) out.segment<3>(3 * g.corner) += g.w * v.segment<3>(3 * g.dof);
+  // Element e's slots of (P v) (24), or, with a filter, of P v~ where v~ keeps the entries of the DOFs whose
+  // constrained flag equals want_constrained. Each corner's entries follow one another, corners ascending (the
+  // constructor): summed in registers.
+  Vec24 element_vector(int e, const VecX& v, const std::vector<char>* constrained = nullptr,
+                       bool want_constrained = false) const {
+    Vec24 out;
+    const std::span<const GatherEntry> g = gather[std::size_t(e)];
+    std::size_t k = 0;
+    for (int a = 0; a < 8; ++a) {
+      Vec3 sum = Vec3::Zero();
+      for (; k < g.size() && g[k].corner == a; ++k)
+        if (constrained == nullptr || bool((*constrained)[std::size_t(g[k].dof)]) == want_constrained)
+          sum += g[k].w * v.segment<3>(3 * g[k].dof);
+      out.segment<3>(3 * a) = sum;
+    }
     return out;
   }
 
@@ -433,7 +444,10 @@ void FemSystem::reuse_storage(Storage&& storage) {
 }
 
 void FemSystem::prolong(const std::vector<Vec3>& dofs, std::vector<Vec3>& slots) const {
-  m_impl->model().dofs().prolong(dofs, slots);
+  const DofMap& dm = m_impl->model().dofs();
+  slots.resize(std::size_t(dm.num_slots()));
+  m_impl->executor_ptr->parallel_for(dm.num_slots(), 8 * kGrain,
+                                     [&](int b, int e) { dm.prolong_range(dofs, slots, b, e); });
 }
 
 std::vector<Mat3> FemSystem::dof_rotations(const ElementFrame& frame) const {

@@ -28,6 +28,8 @@ struct DofMap {
   [[nodiscard]] std::string check_invariants() const;
   /// Slot positions P x (num_slots), from DOF values (num_dofs).
   void prolong(const std::vector<Vec3>& dofs, std::vector<Vec3>& slots) const;
+  /// The slots [begin, end) of P x into `slots` (already num_slots long): prolong's sums, for a part of the slots.
+  void prolong_range(const std::vector<Vec3>& dofs, std::vector<Vec3>& slots, int begin, int end) const;
 };
 
 

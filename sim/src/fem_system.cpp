@@ -451,16 +451,21 @@ void FemSystem::prolong(const std::vector<Vec3>& dofs, std::vector<Vec3>& slots)
 }
 
 std::vector<Mat3> FemSystem::dof_rotations(const ElementFrame& frame) const {
-  const ObjectModel& m = m_impl->model();
-  const DofMap& dm = m.dofs();
-  std::vector<Mat3> rotations(std::size_t(m.num_dofs()), Mat3::Zero());
-  for (int e = 0; e < m.num_elements(); ++e)
-    for (int s = 8 * e; s < 8 * e + 8; ++s)
-      for (int q = dm.slot_begin[std::size_t(s)]; q < dm.slot_begin[std::size_t(s) + 1]; ++q)
-        rotations[std::size_t(dm.slot_dof[std::size_t(q)])] +=
-            std::abs(dm.slot_weight[std::size_t(q)]) * frame.rotation[std::size_t(e)];
-  m_impl->executor_ptr->parallel_for(m.num_dofs(), 1024, [&](int b, int e) {
-    for (int d = b; d < e; ++d) rotations[std::size_t(d)] = gram_schmidt_rotation(rotations[std::size_t(d)]);
+  Impl& im = *m_impl;
+  std::vector<Mat3> rotations(std::size_t(im.model().num_dofs()));
+  // Each DOF's sum in element order (the gather lists are P's rows of each element's slots, in slot order), by
+  // parts of the DOFs on the executor's threads.
+  const int parts = im.ensure_parts();
+  im.executor_ptr->parallel_for(parts, 1, [&](int tb, int te) {
+    for (int t = tb; t < te; ++t) {
+      const int lo = im.part_dof[std::size_t(t)], hi = im.part_dof[std::size_t(t) + 1];
+      for (int d = lo; d < hi; ++d) rotations[std::size_t(d)].setZero();
+      for (const int e : im.part_elements[std::size_t(t)])
+        for (const GatherEntry& g : im.gather[std::size_t(e)])
+          if (g.dof >= lo && g.dof < hi)
+            rotations[std::size_t(g.dof)] += std::abs(g.w) * frame.rotation[std::size_t(e)];
+      for (int d = lo; d < hi; ++d) rotations[std::size_t(d)] = gram_schmidt_rotation(rotations[std::size_t(d)]);
+    }
   });
   return rotations;
 }

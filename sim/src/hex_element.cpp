@@ -85,13 +85,15 @@ Mat24 unit_hex_stiffness(double nu, HexFormulation f) {
 }
 
 Mat3 hex_center_gradient(const Eigen::Matrix<double, 3, 8>& x, double h) {
-  // At the centre, dN_a/dxi_d = +-1/4 with the sign of corner a's bit d.
-  Mat3 F = Mat3::Zero();
-  for (int a = 0; a < 8; ++a) {
-    const Vec3 g(((a & 1) ? 0.25 : -0.25), ((a & 2) ? 0.25 : -0.25), ((a & 4) ? 0.25 : -0.25));
-    F.noalias() += x.col(a) * g.transpose();
+  // At the centre, dN_a/dxi_d = +-1/4 with the sign of corner a's bit d: F(i, d) sums x(i, a) dN_a/dxi_d over the
+  // corners in order (the products by 1/4 are exact), then divides by h.
+  Mat3 F;
+  for (int d = 0; d < 3; ++d) {
+    Vec3 sum = Vec3::Zero();
+    for (int a = 0; a < 8; ++a) sum += x.col(a) * (((a >> d) & 1) ? 0.25 : -0.25);
+    F.col(d) = sum / h;
   }
-  return F / h;
+  return F;
 }
 
 namespace {

@@ -270,6 +270,17 @@ struct FemSystem::Impl {
     }
     return parts;
   }
+  // Calls body(lo, hi, elements) for each part of the DOFs (see part_dof) on the executor's threads: the DOFs
+  // [lo, hi) and, ascending, the elements that touch them. A part's rows are its own, and each of their sums can run
+  // in element order, as in one serial pass, whatever the thread count.
+  template <class Body>
+  void for_each_part(Body&& body) {
+    const int parts = ensure_parts();
+    executor_ptr->parallel_for(parts, 1, [&](int tb, int te) {
+      for (int t = tb; t < te; ++t)
+        body(part_dof[std::size_t(t)], part_dof[std::size_t(t) + 1], part_elements[std::size_t(t)]);
+    });
+  }
 
   Impl(const ObjectModel& m, Executor& ex) : model_ptr(&m), executor_ptr(&ex) {
     const DofMap& dm = m.dofs();
@@ -293,17 +304,12 @@ struct FemSystem::Impl {
   // Adds the element vectors (num_elements x 24) into a DOF vector through P^T: each DOF's sum in element order, by
   // parts of the DOFs in parallel (see part_dof), so the sums do not depend on the parts.
   void gather_vectors(const std::vector<Vec24>& fe, VecX& f) {
-    const int nd = model().num_dofs();
-    f.resize(3 * nd);
-    const int parts = ensure_parts();
-    executor_ptr->parallel_for(parts, 1, [&](int tb, int te) {
-      for (int t = tb; t < te; ++t) {
-        const int lo = part_dof[std::size_t(t)], hi = part_dof[std::size_t(t) + 1];
-        f.segment(3 * lo, 3 * (hi - lo)).setZero();
-        for (const int e : part_elements[std::size_t(t)])
-          for (const GatherEntry& g : gather[std::size_t(e)])
-            if (g.dof >= lo && g.dof < hi) f.segment<3>(3 * g.dof) += g.w * fe[std::size_t(e)].segment<3>(3 * g.corner);
-      }
+    f.resize(3 * model().num_dofs());
+    for_each_part([&](int lo, int hi, const std::vector<int>& elements) {
+      f.segment(3 * lo, 3 * (hi - lo)).setZero();
+      for (const int e : elements)
+        for (const GatherEntry& g : gather[std::size_t(e)])
+          if (g.dof >= lo && g.dof < hi) f.segment<3>(3 * g.dof) += g.w * fe[std::size_t(e)].segment<3>(3 * g.corner);
     });
   }
 
@@ -454,18 +460,13 @@ std::vector<Mat3> FemSystem::dof_rotations(const ElementFrame& frame) const {
   Impl& im = *m_impl;
   std::vector<Mat3> rotations(std::size_t(im.model().num_dofs()));
   // Each DOF's sum in element order (the gather lists are P's rows of each element's slots, in slot order), by
-  // parts of the DOFs on the executor's threads.
-  const int parts = im.ensure_parts();
-  im.executor_ptr->parallel_for(parts, 1, [&](int tb, int te) {
-    for (int t = tb; t < te; ++t) {
-      const int lo = im.part_dof[std::size_t(t)], hi = im.part_dof[std::size_t(t) + 1];
-      for (int d = lo; d < hi; ++d) rotations[std::size_t(d)].setZero();
-      for (const int e : im.part_elements[std::size_t(t)])
-        for (const GatherEntry& g : im.gather[std::size_t(e)])
-          if (g.dof >= lo && g.dof < hi)
-            rotations[std::size_t(g.dof)] += std::abs(g.w) * frame.rotation[std::size_t(e)];
-      for (int d = lo; d < hi; ++d) rotations[std::size_t(d)] = gram_schmidt_rotation(rotations[std::size_t(d)]);
-    }
+  // parts of the DOFs.
+  im.for_each_part([&](int lo, int hi, const std::vector<int>& elements) {
+    for (int d = lo; d < hi; ++d) rotations[std::size_t(d)].setZero();
+    for (const int e : elements)
+      for (const GatherEntry& g : im.gather[std::size_t(e)])
+        if (g.dof >= lo && g.dof < hi) rotations[std::size_t(g.dof)] += std::abs(g.w) * frame.rotation[std::size_t(e)];
+    for (int d = lo; d < hi; ++d) rotations[std::size_t(d)] = gram_schmidt_rotation(rotations[std::size_t(d)]);
   });
   return rotations;
 }
@@ -589,11 +590,8 @@ void FemSystem::assemble_system(double mc, double kc, const ElementFrame& frame,
   double* val = A.valuePtr();
   std::fill(val, val + A.nonZeros(), 0.0);
   coupling.setZero(3 * nd);
-  const int parts = im.ensure_parts();
-  im.executor_ptr->parallel_for(parts, 1, [&](int tb, int te) {
-    for (int t = tb; t < te; ++t)
-      im.scatter(im.part_elements[std::size_t(t)], im.part_dof[std::size_t(t)], im.part_dof[std::size_t(t) + 1], kc,
-                 frame, constrained, u, val, coupling);
+  im.for_each_part([&](int lo, int hi, const std::vector<int>& elements) {
+    im.scatter(elements, lo, hi, kc, frame, constrained, u, val, coupling);
   });
 
   // Lumped mass on the diagonal; identity rows for constrained DOFs.
@@ -646,13 +644,10 @@ void FemSystem::system_product(double mc, double kc, const ElementFrame& frame, 
   im.executor_ptr->parallel_for(ne, kGrain, [&](int b, int en) {
     for (int e = b; e < en; ++e) ke[std::size_t(e)] = im.element_product(e, kc, frame, constrained, false, x);
   });
-  im.executor_ptr->parallel_for(parts, 1, [&](int tb, int te) {
-    for (int t = tb; t < te; ++t) {
-      const int lo = im.part_dof[std::size_t(t)], hi = im.part_dof[std::size_t(t) + 1];
-      y.segment(3 * lo, 3 * (hi - lo)).setZero();
-      im.add_products(im.part_elements[std::size_t(t)], lo, hi, constrained, ke, y);
-      finish_rows(lo, hi);
-    }
+  im.for_each_part([&](int lo, int hi, const std::vector<int>& elements) {
+    y.segment(3 * lo, 3 * (hi - lo)).setZero();
+    im.add_products(elements, lo, hi, constrained, ke, y);
+    finish_rows(lo, hi);
   });
 }
 

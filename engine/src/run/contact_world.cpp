@@ -28,6 +28,13 @@ namespace {
 using sim::Vec3;
 
 constexpr double kMargin = 1e-4;  // Bullet's collision margin of convex shapes (rigid-rigid contact only), m
+// The tissue's queries against a triangle mesh run on a second BVH of the same triangles in units of 1 / kQueryScale
+// m ("query units"). Bullet pads every triangle's box in its BVH to at least 0.002 units per axis
+// (btOptimizedBvh's MIN_AABB_DIMENSION, meant for objects a metre in size): in metres that is 2 mm, larger than the
+// bones' and the punch's triangles, so that a box query of the search depth visited 7-72 triangles in
+// meniscus_punch where 1-10 reach it. The scale is a power of two, so every coordinate, distance and comparison
+// scales exactly, and a query gives the result it gives in metres, bit for bit.
+constexpr double kQueryScale = 131072.0;  // 2^17: the pad becomes 15 nm
 
 btVector3 bt(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
 Vec3 from_bt(const btVector3& v) { return {v.x(), v.y(), v.z()}; }
@@ -62,31 +69,33 @@ sim::TriMesh load_collider(const Scene& scene, const std::string& path, double s
   }
 }
 
-// What a box query of a triangle mesh proved about the triangles near a sample: at the local point `anchor` (m), the
-// `count` triangles `candidates` (in the order the query visited them) were the nearest, and every other triangle lay
-// at least `margin` away (the nearest of those found, or the box's half-size for the ones it did not visit: a
-// triangle outside the cube lies farther than its half-size). Once the sample has moved by delta from the anchor,
-// every other triangle lies at least margin - delta away; while the nearest candidate is nearer than that, a box query
-// would find it, with its ties broken the same way (the candidates are visited in the query's order), and give the
-// same distance, normal and clearance (the same corners and arithmetic): the query can be left out without changing
-// any result. margin < 0: none.
+// What a box query of a triangle mesh proved about the triangles near a sample: at the local point `anchor` (query
+// units, as all distances here), the `count` triangles `candidates` (in the order the query visited them) were the
+// nearest, and every other triangle lay at least `margin` away (the nearest of those found, or the box's half-size
+// for the ones it did not visit: a triangle outside the cube lies farther than its half-size). Once the sample has
+// moved by delta from the anchor, every other triangle lies at least margin - delta away; while the nearest
+// candidate is nearer than that, a box query would find it, with its ties broken the same way (the candidates are
+// visited in the query's order), and give the same distance, normal and clearance (the same corners and
+// arithmetic): the query can be left out without changing any result. margin < 0: none.
 struct NearestCertificate {
   static constexpr int kCandidates = 8;  // a vertex of the bones' meshes has 5-8 triangles around it
-  btVector3 anchor{0, 0, 0};             // m, in the mesh's frame
+  btVector3 anchor{0, 0, 0};             // in the mesh's frame, query units (kQueryScale)
   std::array<int, kCandidates> candidates{};
   int count = 0;
-  double margin = -1.0;  // m
+  double margin = -1.0;  // query units
 };
 
 // One rigid shape in the Bullet world.
 struct Collider {
   ColliderState state;
-  std::unique_ptr<btCollisionShape> shape;        // the shape the tissue is queried against (and Bullet's, mostly)
+  std::unique_ptr<btCollisionShape> shape;        // Bullet's shape, which the tissue is queried against when convex
   std::unique_ptr<btCollisionShape> hull;         // a dynamic mesh body's convex hull (Bullet's rigid contact)
   std::unique_ptr<btTriangleIndexVertexArray> mesh_array;
-  std::vector<btScalar> vertices;                 // 3 |V|, m, kept alive for mesh_array
+  std::unique_ptr<btTriangleIndexVertexArray> query_array;  // the same triangles, in query units (kQueryScale)
+  std::unique_ptr<btBvhTriangleMeshShape> query_bvh;        // the BVH of query_array
+  std::vector<btScalar> vertices;                 // 3 |V|, m, kept alive for mesh_array and query_array
   std::vector<int> triangles;                     // 3 |F|
-  btBvhTriangleMeshShape* concave = nullptr;      // shape, when it is a triangle mesh
+  btBvhTriangleMeshShape* concave = nullptr;      // query_bvh, when the shape is a triangle mesh
   btConvexShape* convex = nullptr;                // shape, when it is convex
   std::unique_ptr<btDefaultMotionState> motion;
   std::unique_ptr<btRigidBody> body;
@@ -116,10 +125,10 @@ struct Collider {
     certificate.clear();
   }
 
-  // Triangle `index`'s corners in the mesh's frame, as Bullet hands them to a query (its vertex times the mesh's
-  // scaling; btStridingMeshInterface's processing of a double-precision vertex array).
+  // Triangle `index`'s corners in the mesh's frame, in query units, as Bullet hands them to a query (its vertex
+  // times the query mesh's scaling; btStridingMeshInterface's processing of a double-precision vertex array).
   [[nodiscard]] std::array<btVector3, 3> corners(int index) const {
-    const btVector3& s = mesh_array->getScaling();
+    const btVector3& s = query_array->getScaling();
     std::array<btVector3, 3> out;
     for (int k = 0; k < 3; ++k) {
       const btScalar* v = &vertices[3 * std::size_t(triangles[3 * std::size_t(index) + std::size_t(k)])];
@@ -129,10 +138,11 @@ struct Collider {
   }
 };
 
-// The nearest triangle of a concave mesh to a local point, through Bullet's BVH and Bullet's closed-form closest point
-// on a triangle (btVoronoiSimplexSolver::closestPtPointTriangle, the Voronoi-region test GJK's simplex solver uses;
-// a full GJK per triangle cost 3-4 times as much and gave the same point). Also keeps the certificate's candidates:
-// the kCandidates nearest triangles visited, and the distance of the nearest other one (`outside`).
+// The nearest triangle of a concave mesh to a local point (query units, as all its distances), through Bullet's BVH
+// and Bullet's closed-form closest point on a triangle (btVoronoiSimplexSolver::closestPtPointTriangle, the
+// Voronoi-region test GJK's simplex solver uses; a full GJK per triangle cost 3-4 times as much and gave the same
+// point). Also keeps the certificate's candidates: the kCandidates nearest triangles visited, and the distance of the
+// nearest other one (`outside`).
 struct NearestTriangle : btTriangleCallback {
   static constexpr int K = NearestCertificate::kCandidates;
   btVector3 point;
@@ -213,11 +223,12 @@ struct NearestTriangle : btTriangleCallback {
 double nearest_result(const NearestTriangle& cb, const btTransform& pose, Vec3& normal, double& clearance) {
   const btVector3 away = cb.point - cb.closest;
   const bool inside = away.dot(cb.face_normal) < 0;
-  clearance = inside ? 0.0 : cb.best;
-  btVector3 n = cb.best > 1e-12 ? (inside ? -away : away) : cb.face_normal;
+  const double best = cb.best / kQueryScale;  // m
+  clearance = inside ? 0.0 : best;
+  btVector3 n = best > 1e-12 ? (inside ? -away : away) : cb.face_normal;
   n.normalize();
   normal = from_bt(pose.getBasis() * n);
-  return inside ? -cb.best : cb.best;
+  return inside ? -best : best;
 }
 
 // The signed distance of a world point to a collider at `pose`: < 0 inside. `normal` (world, unit) points out of
@@ -238,14 +249,15 @@ double signed_distance(const Collider& c, const btTransform& pose, const Vec3& p
   }
   NearestTriangle cb;
   cb.mesh = &c;
-  cb.point = pose.invXform(bt(p));
-  const btVector3 e(depth, depth, depth);
+  cb.point = kQueryScale * pose.invXform(bt(p));
+  const double box = kQueryScale * depth;  // query units
+  const btVector3 e(box, box, box);
   c.concave->processAllTriangles(&cb, cb.point - e, cb.point + e);
-  if (!(cb.best < depth)) {
+  if (!(cb.best < box)) {
     clearance = depth;  // nothing within the cube of half-size depth: nothing within depth
     return depth;
   }
-  if (certificate) *certificate = cb.certificate(depth);
+  if (certificate) *certificate = cb.certificate(box);
   return nearest_result(cb, pose, normal, clearance);
 }
 
@@ -267,9 +279,10 @@ double nearest_anywhere(const Collider& c, const btTransform& pose, const Vec3& 
                         double& clearance, NearestCertificate* certificate) {
   btVector3 lo, hi;
   c.concave->getAabb(btTransform::getIdentity(), lo, hi);
-  const btVector3 point = pose.invXform(bt(p));
-  double reach = 0.0;  // m: a cube of this half-size around the point holds the mesh
+  const btVector3 point = kQueryScale * pose.invXform(bt(p));
+  double reach = 0.0;  // a cube of this half-size around the point holds the mesh (query units, then m)
   for (int k = 0; k < 3; ++k) reach = std::max({reach, double(point[k] - lo[k]), double(hi[k] - point[k])});
+  reach /= kQueryScale;
   if (!std::isfinite(reach) || !(from > 0.0)) return signed_distance(c, pose, p, from, normal, clearance, certificate);
   for (double box = from;; box *= 2.0) {
     const double d = signed_distance(c, pose, p, std::min(box, reach), normal, clearance, certificate);
@@ -293,16 +306,16 @@ double tracked_distance(const Collider& c, const btTransform& pose, const Vec3& 
     // finds nothing nearer than `near` and the second finds it.
     NearestTriangle cb;
     cb.mesh = &c;
-    cb.point = pose.invXform(bt(p));
-    const double moved = double((cb.point - certificate->anchor).length());
+    cb.point = kQueryScale * pose.invXform(bt(p));
+    const double moved = double((cb.point - certificate->anchor).length());  // query units
     for (int k = 0; k < certificate->count; ++k) {
       const int index = certificate->candidates[std::size_t(k)];
       std::array<btVector3, 3> corners = c.corners(index);
       cb.processTriangle(corners.data(), 0, index);
     }
     // The slack covers the rounding of the distances (about 1e-16 of the coordinates, here 1e-18 m).
-    constexpr double kSlack = 1e-12;  // m
-    if (cb.best + moved + kSlack < certificate->margin && cb.best < deep) {
+    constexpr double kSlack = 1e-12 * kQueryScale;  // query units
+    if (cb.best + moved + kSlack < certificate->margin && cb.best < kQueryScale * deep) {
       certified = true;
       return nearest_result(cb, pose, normal, clearance);
     }
@@ -397,8 +410,14 @@ void ContactWorld::Impl::set_mesh(Collider& c, const sim::TriMesh& mesh) {
                                                               c.vertices.data(), 3 * int(sizeof(btScalar)));
   auto bvh = std::make_unique<btBvhTriangleMeshShape>(c.mesh_array.get(), true);
   bvh->setMargin(kMargin);
-  c.concave = bvh.get();
   c.shape = std::move(bvh);
+  c.query_array = std::make_unique<btTriangleIndexVertexArray>(int(mesh.triangles.size()), c.triangles.data(),
+                                                               3 * int(sizeof(int)), int(mesh.vertices.size()),
+                                                               c.vertices.data(), 3 * int(sizeof(btScalar)));
+  c.query_array->setScaling(btVector3(kQueryScale, kQueryScale, kQueryScale));
+  c.query_bvh = std::make_unique<btBvhTriangleMeshShape>(c.query_array.get(), true);
+  c.query_bvh->setMargin(kQueryScale * kMargin);  // getAabb's margin, as the world's shape has it
+  c.concave = c.query_bvh.get();
   set_pseudonormals(c);
 }
 
@@ -606,7 +625,7 @@ void ContactWorld::Impl::query_sample(std::size_t ci, const QueryFrame& f, const
     // it is at least as long as both together.
     bool through = last > 0.0;
     if (!through && (local - c.cache_local[std::size_t(i)]).norm() >= was_clear + depth) {
-      SurfaceCrossings crossings(bt(c.cache_local[std::size_t(i)]), bt(local));
+      SurfaceCrossings crossings(bt(kQueryScale * c.cache_local[std::size_t(i)]), bt(kQueryScale * local));
       c.concave->performRaycast(&crossings, crossings.m_from, crossings.m_to);
       through = crossings.count > 0;
     }

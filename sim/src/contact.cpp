@@ -77,13 +77,6 @@ Vec3 row_value(const std::vector<ContactDof>& row, const std::vector<Vec3>& x) {
 
 }  // namespace
 
-Vec3 ContactSamples::position(int i, const std::vector<Vec3>& x) const {
-  Vec3 p = Vec3::Zero();
-  for (int k = begin[std::size_t(i)]; k < begin[std::size_t(i) + 1]; ++k)
-    p += dofs[std::size_t(k)].weight * x[std::size_t(dofs[std::size_t(k)].dof)];
-  return p;
-}
-
 // function-length: one pass over S's vertices and faces, each a few lines
 ContactSamples build_contact_samples(const ObjectModel& model, const TriMesh& surface,
                                      const SurfaceEmbedding& embedding, double resolution) {

@@ -29,8 +29,14 @@ struct ContactSamples {
   std::vector<ContactDof> dofs;      ///< rows: sample i is sum over [begin[i], begin[i+1]) (nnz)
   std::vector<int> face;             ///< the face a face point lies on, -1 for a vertex sample (n)
   [[nodiscard]] int size() const { return int(rest.size()); }
-  /// Deformed position of sample i from DOF positions (num_dofs), m.
-  [[nodiscard]] Vec3 position(int i, const std::vector<Vec3>& x) const;
+  /// Deformed position of sample i from DOF positions (num_dofs), m. Inline: the contact queries take every
+  /// sample's position at every step.
+  [[nodiscard]] Vec3 position(int i, const std::vector<Vec3>& x) const {
+    Vec3 p = Vec3::Zero();
+    for (int k = begin[std::size_t(i)]; k < begin[std::size_t(i) + 1]; ++k)
+      p += dofs[std::size_t(k)].weight * x[std::size_t(dofs[std::size_t(k)].dof)];
+    return p;
+  }
   /// Velocity of sample i from DOF velocities (num_dofs), m/s.
   [[nodiscard]] Vec3 velocity(int i, const std::vector<Vec3>& v) const { return position(i, v); }
 };

@@ -36,6 +36,10 @@ constexpr double kMargin = 1e-4;  // Bullet's collision margin of convex shapes 
 // scales exactly, and a query gives the result it gives in metres, bit for bit.
 constexpr double kQueryScale = 131072.0;  // 2^17: the pad becomes 15 nm
 
+// Triangles this thread has handed to the nearest-point test (NearestTriangle::processTriangle), for
+// ContactProfile::triangles.
+thread_local long t_triangles = 0;
+
 btVector3 bt(const Vec3& v) { return {v.x(), v.y(), v.z()}; }
 Vec3 from_bt(const btVector3& v) { return {v.x(), v.y(), v.z()}; }
 
@@ -160,6 +164,7 @@ struct NearestTriangle : btTriangleCallback {
   const Collider* mesh = nullptr;  // the collider whose triangles these are (its pseudonormals)
 
   void processTriangle(btVector3* tri, int, int index) override {
+    ++t_triangles;
     btSubSimplexClosestResult r;
     simplex.closestPtPointTriangle(point, tri[0], tri[1], tri[2], r);
     const double dist = double((point - r.m_closestPointOnSimplex).length());
@@ -386,7 +391,7 @@ struct ContactWorld::Impl {
     std::vector<sim::Contact> contacts;
     std::vector<ContactRef> refs;
     double max_penetration = 0.0;  // m
-    long searched = 0, certified = 0;
+    long searched = 0, certified = 0, triangles = 0;
   };
   // The frame of collider ci for n samples at t (sizes its caches for them).
   QueryFrame frame_of(std::size_t ci, int n, double t, double dt, const std::vector<sim::Pose>& now,
@@ -613,6 +618,7 @@ void ContactWorld::Impl::query_sample(std::size_t ci, const QueryFrame& f, const
   double& clearance = c.cache_clearance[std::size_t(i)];
   const bool was_outside = last == 0.0 && clearance >= 0.0;  // at its last query, at cache_local
   const double was_clear = clearance;                          // m, free of the surface around cache_local
+  const long tested = t_triangles;
   double d = tracked_distance(c, f.tr, p, depth, last, normal, clearance, certificate, certified);
   ++(certified ? found.certified : found.searched);
   const double searched = std::max(depth, 2.0 * last);  // m, the largest box tracked_distance searched
@@ -631,6 +637,7 @@ void ContactWorld::Impl::query_sample(std::size_t ci, const QueryFrame& f, const
     }
     if (through) d = nearest_anywhere(c, f.tr, p, 2.0 * searched, normal, clearance, certificate);
   }
+  found.triangles += t_triangles - tested;
   c.cache_local[std::size_t(i)] = local;
   last = d < 0.0 ? -d : 0.0;
   if (!(d < 0.0)) return;
@@ -718,7 +725,7 @@ std::vector<sim::Contact> ContactWorld::find(const sim::ContactSamples& samples,
 
   std::vector<sim::Contact> out;
   m->refs.clear();
-  m->profile.searched = m->profile.certified = 0;
+  m->profile.searched = m->profile.certified = m->profile.triangles = 0;
   for (std::size_t ci = 0; ci < nc; ++ci) {
     Collider& c = m->colliders[ci];
     c.state.max_penetration = 0.0;
@@ -726,6 +733,7 @@ std::vector<sim::Contact> ContactWorld::find(const sim::ContactSamples& samples,
       Impl::Found& f = found[std::size_t(k)];
       m->profile.searched += f.searched;
       m->profile.certified += f.certified;
+      m->profile.triangles += f.triangles;
       c.state.max_penetration = std::max(c.state.max_penetration, f.max_penetration);
       std::move(f.contacts.begin(), f.contacts.end(), std::back_inserter(out));
       m->refs.insert(m->refs.end(), f.refs.begin(), f.refs.end());

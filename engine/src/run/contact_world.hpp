@@ -42,6 +42,7 @@ struct ContactProfile {
   double rigid = 0.0;    ///< forces onto the bodies and Bullet's step
   long searched = 0;     ///< samples whose distance the last find() took from Bullet's box queries
   long certified = 0;    ///< samples whose nearest triangle it took from their last query's certificate instead
+  long triangles = 0;    ///< triangles of mesh colliders those queries and certificates tested for the nearest point
 };
 
 /// For each rest position of `after` (m), the index of the same position in `before` (bit for bit), or -1.

@@ -226,6 +226,19 @@ std::string uv_sphere_obj(double r, int lat, int lon) {
   return s;
 }
 
+// Numbers in [-1, 1) from a 64-bit linear congruential generator: the same sequence on every platform.
+class Uniform {
+ public:
+  explicit Uniform(std::uint64_t seed) : m_seed(seed) {}
+  double operator()() {
+    m_seed = m_seed * 6364136223846793005ull + 1442695040888963407ull;
+    return double(m_seed >> 11) / double(1ull << 52) - 1.0;
+  }
+
+ private:
+  std::uint64_t m_seed;
+};
+
 // A sample whose nearest triangle of a mesh collider its last box query certified (every other triangle farther than
 // the nearest candidate by more than the sample has moved since) is not queried again: its contact must be the one a
 // full query gives, bit for bit. Samples 0.05-0.45 mm inside and outside a 1 cm sphere of 0.65 mm triangles slide
@@ -237,11 +250,7 @@ TEST_F(ContactQuery, CertifiedNearestTrianglesGiveTheContactsOfFullQueries) {
   constexpr double kDepth = 1e-3;  // m: the samples stay within half of it of the surface, where a full query (the
                                    // search depth alone) and a tracked one (up to twice the last depth) agree
   constexpr double kRadius = 0.01;  // m
-  std::uint64_t seed = 12345;
-  const auto uniform = [&seed] {  // in [-1, 1)
-    seed = seed * 6364136223846793005ull + 1442695040888963407ull;
-    return double(seed >> 11) / double(1ull << 52) - 1.0;
-  };
+  Uniform uniform(12345);
   sim::ContactSamples samples;
   std::vector<Vec3> x;
   std::vector<double> radius;  // m, each sample's distance from the centre, kept as it slides
@@ -316,11 +325,7 @@ TEST_F(ContactQuery, BoxQueriesTestOnlyTheTrianglesWhoseBoxesMeetTheirCube) {
   const Scene scene = fixed_mesh_scene(obj);
   const std::vector<std::array<Vec3, 2>> boxes = triangle_boxes(obj);
   constexpr double kDepth = 3e-4;  // m
-  std::uint64_t seed = 2468;
-  const auto uniform = [&seed] {  // in [-1, 1)
-    seed = seed * 6364136223846793005ull + 1442695040888963407ull;
-    return double(seed >> 11) / double(1ull << 52) - 1.0;
-  };
+  Uniform uniform(2468);
   sim::ContactSamples samples;
   std::vector<Vec3> x;
   long expected = 0;  // triangle boxes that meet the samples' cubes

@@ -31,9 +31,9 @@ constexpr double kMargin = 1e-4;  // Bullet's collision margin of convex shapes 
 // The tissue's queries against a triangle mesh run on a second BVH of the same triangles in units of 1 / kQueryScale
 // m ("query units"). Bullet pads every triangle's box in its BVH to at least 0.002 units per axis
 // (btOptimizedBvh's MIN_AABB_DIMENSION, meant for objects a metre in size): in metres that is 2 mm, larger than the
-// bones' and the punch's triangles, so that a box query of the search depth visited 7-72 triangles in
-// meniscus_punch where 1-10 reach it. The scale is a power of two, so every coordinate, distance and comparison
-// scales exactly, and a query gives the result it gives in metres, bit for bit.
+// bones' and the punch's triangles: a box query of the search depth in meniscus_punch tested 6.7-72 triangles on
+// average (per collider), against 0.55-10.6 here. The scale is a power of two, so every coordinate, distance and
+// comparison scales exactly, and a query gives the result it gives in metres, bit for bit.
 constexpr double kQueryScale = 131072.0;  // 2^17: the pad becomes 15 nm
 
 // Triangles this thread has handed to the nearest-point test (NearestTriangle::processTriangle), for

@@ -630,7 +630,8 @@ std::vector<ContactForce> World::contact_forces() const {
 
 ContactTiming World::contact_timing() const {
   if (!m->contact) return {};
-  return {m->contact->profile().queries, m->sim->profile().contact, m->contact->profile().rigid};
+  const ContactProfile& q = m->contact->profile();
+  return {q.queries, m->sim->profile().contact, q.rigid, q.searched, q.triangles};
 }
 
 double World::rigid_body_energy() const { return m->contact ? m->contact->rigid_energy() : 0.0; }

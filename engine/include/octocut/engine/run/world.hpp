@@ -57,6 +57,8 @@ struct ContactTiming {
   double queries = 0.0;  ///< sample positions, the bounding-box prefilter and Bullet's distance queries
   double terms = 0.0;    ///< the contact terms added to the implicit system and their forces afterwards
   double rigid = 0.0;    ///< forces onto the bodies and Bullet's step
+  long box_queries = 0;  ///< samples whose distance the queries took from Bullet's box queries (not certified)
+  long triangles = 0;    ///< triangles of mesh colliders the queries tested for the nearest point
 };
 
 /// True when every DOF position and velocity of `state` is finite.

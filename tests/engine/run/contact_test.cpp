@@ -71,6 +71,76 @@ TEST_F(ContactTest, ABlockRestingOnAFloorLoadsItWithItsWeight) {
   EXPECT_GT(r.contact.samples, 8);  // the box's faces are sampled, not only its 8 corners
 }
 
+// The floor box of kBlock's top 4 x 4 cm as a closed OBJ in m, its top face (z = 0) a grid of 1 mm squares split
+// into 3,200 triangles, the rest fans onto the bottom's corners: a fine concave-query mesh whose surface is the
+// primitive box's where the block stands.
+std::string grid_floor_obj() {
+  constexpr int kN = 40;       // squares per side of the top
+  constexpr double kH = 0.02;  // m: half the side
+  std::string s;
+  const auto v = [&s](double x, double y, double z) {
+    s += "v " + std::to_string(x) + " " + std::to_string(y) + " " + std::to_string(z) + "\n";
+  };
+  for (int j = 0; j <= kN; ++j)
+    for (int i = 0; i <= kN; ++i) v(-kH + 2 * kH * i / kN, -kH + 2 * kH * j / kN, 0.0);
+  const int b = (kN + 1) * (kN + 1) + 1;  // the bottom's corners b..b+3 (1-based): (-,-), (+,-), (+,+), (-,+)
+  v(-kH, -kH, -0.02), v(kH, -kH, -0.02), v(kH, kH, -0.02), v(-kH, kH, -0.02);
+  const auto top = [](int i, int j) { return 1 + j * (kN + 1) + i; };
+  const auto f = [&s](int a, int c, int d) {
+    s += "f " + std::to_string(a) + " " + std::to_string(c) + " " + std::to_string(d) + "\n";
+  };
+  for (int j = 0; j < kN; ++j)
+    for (int i = 0; i < kN; ++i) {
+      f(top(i, j), top(i + 1, j), top(i + 1, j + 1));
+      f(top(i, j), top(i + 1, j + 1), top(i, j + 1));
+    }
+  f(b, b + 2, b + 1), f(b, b + 3, b + 2);  // the bottom, facing -z
+  // Each side: a fan from one bottom corner over its top edge, then the triangle to the other bottom corner.
+  for (int k = 0; k < kN; ++k) {
+    f(b, top(k + 1, 0), top(k, 0));            // y = -kH, facing -y
+    f(b + 1, top(kN, k + 1), top(kN, k));      // x = +kH, facing +x
+    f(b + 2, top(kN - k - 1, kN), top(kN - k, kN));  // y = +kH, facing +y
+    f(b + 3, top(0, kN - k - 1), top(0, kN - k));    // x = -kH, facing -x
+  }
+  f(b, b + 1, top(kN, 0)), f(b + 1, b + 2, top(kN, kN)), f(b + 2, b + 3, top(0, kN)), f(b + 3, b, top(0, 0));
+  return s;
+}
+
+// The block of the test above on a floor that is a triangle mesh with 1 mm triangles under it (a concave collider:
+// Bullet's box queries on the BVH and the closest point on each triangle), against the same block on the primitive
+// box (Bullet's GJK/EPA): the floor is the same plane where the block stands, so the floor's force, the deepest
+// penetration (9 um) and the block's centre of mass agree to rounding (1e-16 m seen).
+TEST_F(ContactTest, AMeshFloorOfSmallTrianglesCarriesTheBlockAsThePrimitiveBoxDoes) {
+  write("floor.obj", grid_floor_obj());
+  std::string mesh_block = kBlock;
+  const std::string box = R"("shape": {"box": {"size": [0.2, 0.2, 0.02]}}, "motion": "fixed",
+                    "position": [0, 0, -0.01]})";
+  const auto at = mesh_block.find(box);
+  ASSERT_NE(at, std::string::npos);
+  mesh_block.replace(at, box.size(), R"("shape": {"mesh": "floor.obj", "scale": 1.0}, "motion": "fixed",
+                    "position": [0, 0, 0]})");
+  // Dropped from 0.1 mm above the floor, so that every sample that touches it first is inside by that fall (a
+  // sample exactly on the surface is inside or not by a rounding error, which differs between GJK/EPA and the mesh).
+  const std::vector<std::string> lift = {"/object/surface/box/min=[-0.01, -0.01, 0.0001]",
+                                         "/object/surface/box/max=[0.01, 0.01, 0.0201]"};
+  World on_box(scene(kBlock, lift), WorldOptions{.render = false});
+  World on_mesh(scene(mesh_block, lift), WorldOptions{.render = false});
+  while (!on_box.done()) on_box.step();
+  while (!on_mesh.done()) on_mesh.step();
+  const Report a = on_box.report(), m = on_mesh.report();
+  ASSERT_TRUE(a.contact.present && m.contact.present);
+  const double weight = 1000.0 * 0.02 * 0.02 * 0.02 * 9.81;  // N
+  for (int k = 0; k < 3; ++k)
+    EXPECT_NEAR(m.contact.bodies[0].force_n[std::size_t(k)], a.contact.bodies[0].force_n[std::size_t(k)],
+                1e-9 * weight);
+  EXPECT_NEAR(m.contact.bodies[0].force_n[2], -weight, 0.005 * weight);
+  EXPECT_NEAR(m.contact.max_penetration_m, a.contact.max_penetration_m, 1e-12);
+  EXPECT_LT((centre_of_mass(on_mesh.simulator()) - centre_of_mass(on_box.simulator())).norm(), 1e-12);
+  EXPECT_EQ(m.contact.samples, a.contact.samples);
+  EXPECT_TRUE(m.finite);
+  EXPECT_EQ(m.recoveries, 0);
+}
+
 // Mass-weighted mean velocity of the DOFs, m/s.
 Vec3 mean_velocity(const sim::Simulator& s) {
   Vec3 c = Vec3::Zero();

@@ -1,7 +1,6 @@
 #include "octocut/engine/bench/bench.hpp"
 
 #include <algorithm>
-#include <numeric>
 #include <array>
 #include <chrono>
 #include <cstdint>
@@ -12,6 +11,7 @@
 #include <ctime>
 #include <fstream>
 #include <numbers>
+#include <numeric>
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <stdexcept>

@@ -5,8 +5,8 @@
 #include <cstddef>
 #include <cstring>
 
-// The BLAS's and LAPACK's single-precision kernels (Fortran interface; the trailing arguments are the lengths of the
-// character arguments, which gfortran's libraries expect and OpenBLAS ignores).
+// The BLAS's and LAPACK's kernels in single and double precision (Fortran interface; the trailing arguments are the
+// lengths of the character arguments, which gfortran's libraries expect and OpenBLAS ignores).
 extern "C" {
 void ssyrk_(const char* uplo, const char* trans, const int* n, const int* k, const float* alpha, const float* a,
             const int* lda, const float* beta, float* c, const int* ldc, std::size_t, std::size_t);
@@ -17,6 +17,15 @@ void spotrf_(const char* uplo, const int* n, float* a, const int* lda, int* info
 void strsm_(const char* side, const char* uplo, const char* transa, const char* diag, const int* m, const int* n,
             const float* alpha, const float* a, const int* lda, float* b, const int* ldb, std::size_t, std::size_t,
             std::size_t, std::size_t);
+void dsyrk_(const char* uplo, const char* trans, const int* n, const int* k, const double* alpha, const double* a,
+            const int* lda, const double* beta, double* c, const int* ldc, std::size_t, std::size_t);
+void dgemm_(const char* transa, const char* transb, const int* m, const int* n, const int* k, const double* alpha,
+            const double* a, const int* lda, const double* b, const int* ldb, const double* beta, double* c,
+            const int* ldc, std::size_t, std::size_t);
+void dpotrf_(const char* uplo, const int* n, double* a, const int* lda, int* info, std::size_t);
+void dtrsm_(const char* side, const char* uplo, const char* transa, const char* diag, const int* m, const int* n,
+            const double* alpha, const double* a, const int* lda, double* b, const int* ldb, std::size_t, std::size_t,
+            std::size_t, std::size_t);
 }
 
 namespace octocut::sim {
@@ -26,44 +35,75 @@ namespace {
 // microsecond).
 constexpr double kBlasWork = 2048.0;
 
+// The kernels by precision.
+void syrk(const int* n, const int* k, const float* a, const int* lda, float* c, const int* ldc) {
+  const float one = 1.0f, zero = 0.0f;
+  ssyrk_("L", "N", n, k, &one, a, lda, &zero, c, ldc, 1, 1);
+}
+void syrk(const int* n, const int* k, const double* a, const int* lda, double* c, const int* ldc) {
+  const double one = 1.0, zero = 0.0;
+  dsyrk_("L", "N", n, k, &one, a, lda, &zero, c, ldc, 1, 1);
+}
+void gemm_nt(const int* m, const int* n, const int* k, const float* a, const int* lda, const float* b, const int* ldb,
+             float* c, const int* ldc) {
+  const float one = 1.0f, zero = 0.0f;
+  sgemm_("N", "T", m, n, k, &one, a, lda, b, ldb, &zero, c, ldc, 1, 1);
+}
+void gemm_nt(const int* m, const int* n, const int* k, const double* a, const int* lda, const double* b,
+             const int* ldb, double* c, const int* ldc) {
+  const double one = 1.0, zero = 0.0;
+  dgemm_("N", "T", m, n, k, &one, a, lda, b, ldb, &zero, c, ldc, 1, 1);
+}
+void potrf(const int* n, float* a, const int* lda, int* info) { spotrf_("L", n, a, lda, info, 1); }
+void potrf(const int* n, double* a, const int* lda, int* info) { dpotrf_("L", n, a, lda, info, 1); }
+void trsm_rlt(const int* m, const int* n, const float* a, const int* lda, float* b, const int* ldb) {
+  const float one = 1.0f;
+  strsm_("R", "L", "T", "N", m, n, &one, a, lda, b, ldb, 1, 1, 1, 1);
+}
+void trsm_rlt(const int* m, const int* n, const double* a, const int* lda, double* b, const int* ldb) {
+  const double one = 1.0;
+  dtrsm_("R", "L", "T", "N", m, n, &one, a, lda, b, ldb, 1, 1, 1, 1);
+}
+
 // X (m x n, leading dimension ld) := X D^-T, D (n x n, lower, leading dimension ld) the diagonal block above X.
-void solve_below(const float* D, float* X, int m, int n, int ld) {
+template <class T>
+void solve_below(const T* D, T* X, int m, int n, int ld) {
   if (m <= 0) return;
   if (double(m) * n * n < 2.0 * kBlasWork) {
     for (int j = 0; j < n; ++j) {
-      float* xj = X + std::ptrdiff_t(j) * ld;
+      T* xj = X + std::ptrdiff_t(j) * ld;
       for (int k = 0; k < j; ++k) {
-        const float djk = D[j + std::ptrdiff_t(k) * ld];
-        const float* xk = X + std::ptrdiff_t(k) * ld;
+        const T djk = D[j + std::ptrdiff_t(k) * ld];
+        const T* xk = X + std::ptrdiff_t(k) * ld;
         for (int i = 0; i < m; ++i) xj[i] -= xk[i] * djk;
       }
-      const float inv = 1.0f / D[j + std::ptrdiff_t(j) * ld];
+      const T inv = T(1) / D[j + std::ptrdiff_t(j) * ld];
       for (int i = 0; i < m; ++i) xj[i] *= inv;
     }
     return;
   }
-  const float one = 1.0f;
-  strsm_("R", "L", "T", "N", &m, &n, &one, D, &ld, X, &ld, 1, 1, 1, 1);
+  trsm_rlt(&m, &n, D, &ld, X, &ld);
 }
 
 // D (n x n, lower, leading dimension ld) := its Cholesky factor in place; false when a pivot is not positive.
-bool factor_diagonal(float* D, int n, int ld) {
+template <class T>
+bool factor_diagonal(T* D, int n, int ld) {
   if (n >= 16) {
     int info = 0;
-    spotrf_("L", &n, D, &ld, &info, 1);
+    potrf(&n, D, &ld, &info);
     return info == 0;
   }
   for (int j = 0; j < n; ++j) {
-    float* dj = D + std::ptrdiff_t(j) * ld;
+    T* dj = D + std::ptrdiff_t(j) * ld;
     for (int k = 0; k < j; ++k) {
-      const float* dk = D + std::ptrdiff_t(k) * ld;
-      const float djk = dk[j];
+      const T* dk = D + std::ptrdiff_t(k) * ld;
+      const T djk = dk[j];
       for (int i = j; i < n; ++i) dj[i] -= dk[i] * djk;
     }
-    if (!(dj[j] > 0.0f)) return false;
-    const float root = std::sqrt(dj[j]);
+    if (!(dj[j] > T(0))) return false;
+    const T root = std::sqrt(dj[j]);
     dj[j] = root;
-    const float inv = 1.0f / root;
+    const T inv = T(1) / root;
     for (int i = j + 1; i < n; ++i) dj[i] *= inv;
   }
   return true;
@@ -71,8 +111,9 @@ bool factor_diagonal(float* D, int n, int ld) {
 
 }  // namespace
 
-bool SupernodalFactorizer::factorize(const SupernodalStructure& L, const int* perm, const SpMat& A,
-                                     std::vector<float>& x) {
+template <class T>
+bool SupernodalFactorizer<T>::factorize(const SupernodalStructure& L, const int* perm, const SpMat& A,
+                                        std::vector<T>& x) {
   const int n = L.n;
   if (A.rows() != n || A.cols() != n || !A.isCompressed()) return false;
   m_perm = perm;
@@ -86,11 +127,11 @@ bool SupernodalFactorizer::factorize(const SupernodalStructure& L, const int* pe
   m_head.assign(std::size_t(L.nsuper), -1);
   m_next.assign(std::size_t(L.nsuper), -1);
   m_pos.assign(std::size_t(L.nsuper), 0);
-  x.assign(std::size_t(L.px[L.nsuper]), 0.0f);
+  x.assign(std::size_t(L.px[L.nsuper]), T(0));
   for (int s = 0; s < L.nsuper; ++s) {
     const int nscol = L.super[s + 1] - L.super[s], nsrow = L.pi[s + 1] - L.pi[s];
     const int* rows = L.rows + L.pi[s];
-    float* block = x.data() + L.px[s];
+    T* block = x.data() + L.px[s];
     for (int i = 0; i < nsrow; ++i) m_map[std::size_t(rows[i])] = i;
     const bool ok = assemble(L, A, s, x.data());
     // The descendants whose next rows fall in this supernode's columns (each then moves on to its next ancestor).
@@ -113,7 +154,7 @@ bool SupernodalFactorizer::factorize(const SupernodalStructure& L, const int* pe
     // A non-finite entry below a diagonal reaches, squared, the diagonal of its row's column, where a later
     // supernode (or this one) finds it: checking the diagonals checks every entry.
     for (int j = 0; j < nscol; ++j)
-      if (!(block[j + std::ptrdiff_t(j) * nsrow] > 0.0f) || !std::isfinite(block[j + std::ptrdiff_t(j) * nsrow]))
+      if (!(block[j + std::ptrdiff_t(j) * nsrow] > T(0)) || !std::isfinite(block[j + std::ptrdiff_t(j) * nsrow]))
         return false;
     m_head[std::size_t(s)] = -1;
     link(L, s, nscol);
@@ -122,7 +163,8 @@ bool SupernodalFactorizer::factorize(const SupernodalStructure& L, const int* pe
 }
 
 // Whether A has the pattern that the assembly was planned for.
-bool SupernodalFactorizer::same_pattern(const SpMat& A) const {
+template <class T>
+bool SupernodalFactorizer<T>::same_pattern(const SpMat& A) const {
   const std::size_t cols = std::size_t(A.cols()) + 1, nnz = std::size_t(A.nonZeros());
   return m_outer.size() == cols && m_inner.size() == nnz &&
          std::memcmp(m_outer.data(), A.outerIndexPtr(), cols * sizeof(int)) == 0 &&
@@ -131,7 +173,8 @@ bool SupernodalFactorizer::same_pattern(const SpMat& A) const {
 
 // Where each of A's entries goes in L's values (m_dest: -1 for the upper triangle of P A P^T); false when an entry
 // lies outside L's pattern.
-bool SupernodalFactorizer::plan_assembly(const SupernodalStructure& L, const SpMat& A) {
+template <class T>
+bool SupernodalFactorizer<T>::plan_assembly(const SupernodalStructure& L, const SpMat& A) {
   const int* outer = A.outerIndexPtr();
   const int* inner = A.innerIndexPtr();
   m_outer.clear();
@@ -162,7 +205,8 @@ bool SupernodalFactorizer::plan_assembly(const SupernodalStructure& L, const SpM
 
 // Adds A's entries of supernode s's columns on and below the diagonal (of P A P^T) into L's values x (planned by
 // plan_assembly); false for a non-finite one.
-bool SupernodalFactorizer::assemble(const SupernodalStructure& L, const SpMat& A, int s, float* x) const {
+template <class T>
+bool SupernodalFactorizer<T>::assemble(const SupernodalStructure& L, const SpMat& A, int s, T* x) const {
   const int* outer = A.outerIndexPtr();
   const double* values = A.valuePtr();
   bool finite = true;
@@ -172,7 +216,7 @@ bool SupernodalFactorizer::assemble(const SupernodalStructure& L, const SpMat& A
       const long at = m_dest[std::size_t(t)];
       if (at < 0) continue;
       finite = finite && std::isfinite(values[t]);
-      x[at] += float(values[t]);
+      x[at] += T(values[t]);
     }
   }
   return finite;
@@ -180,18 +224,19 @@ bool SupernodalFactorizer::assemble(const SupernodalStructure& L, const SpMat& A
 
 // Subtracts descendant d's update of supernode s (whose rows m_map holds) from s's block: the rows of d
 // from pos1 on times the rows pos1 .. pos2 (those in supernode s's columns), transposed.
-void SupernodalFactorizer::update(const SupernodalStructure& L, int s, int d, int pos1, int pos2, const float* x,
-                                  float* block) {
+template <class T>
+void SupernodalFactorizer<T>::update(const SupernodalStructure& L, int s, int d, int pos1, int pos2, const T* x,
+                                     T* block) {
   const int ndcol = L.super[d + 1] - L.super[d], nsrow_d = L.pi[d + 1] - L.pi[d];
   const int ndrow1 = pos2 - pos1, ndrow2 = nsrow_d - pos1, ndrow3 = ndrow2 - ndrow1;
   const int* rows = L.rows + L.pi[d] + pos1;
-  const float* Ld = x + L.px[d] + pos1;  // rows pos1 .. of d's columns, leading dimension nsrow_d
+  const T* Ld = x + L.px[d] + pos1;  // rows pos1 .. of d's columns, leading dimension nsrow_d
   const int k1 = L.super[s], ld = L.pi[s + 1] - L.pi[s];  // the current supernode's first column, its rows
   if (double(ndrow1) * ndrow2 * ndcol < kBlasWork) {
     for (int j = 0; j < ndrow1; ++j) {
-      float* target = block + std::ptrdiff_t(rows[j] - k1) * ld;
+      T* target = block + std::ptrdiff_t(rows[j] - k1) * ld;
       for (int i = j; i < ndrow2; ++i) {
-        float sum = 0.0f;
+        T sum = T(0);
         for (int k = 0; k < ndcol; ++k)
           sum += Ld[i + std::ptrdiff_t(k) * nsrow_d] * Ld[j + std::ptrdiff_t(k) * nsrow_d];
         target[m_map[std::size_t(rows[i])]] -= sum;
@@ -200,28 +245,62 @@ void SupernodalFactorizer::update(const SupernodalStructure& L, int s, int d, in
     return;
   }
   m_c.resize(std::size_t(ndrow1) * std::size_t(ndrow2));
-  const float one = 1.0f, zero = 0.0f;
-  ssyrk_("L", "N", &ndrow1, &ndcol, &one, Ld, &nsrow_d, &zero, m_c.data(), &ndrow2, 1, 1);
-  if (ndrow3 > 0)
-    sgemm_("N", "T", &ndrow3, &ndrow1, &ndcol, &one, Ld + ndrow1, &nsrow_d, Ld, &nsrow_d, &zero,
-           m_c.data() + ndrow1, &ndrow2, 1, 1);
+  syrk(&ndrow1, &ndcol, Ld, &nsrow_d, m_c.data(), &ndrow2);
+  if (ndrow3 > 0) gemm_nt(&ndrow3, &ndrow1, &ndcol, Ld + ndrow1, &nsrow_d, Ld, &nsrow_d, m_c.data() + ndrow1, &ndrow2);
   m_relative.resize(std::size_t(ndrow2));
   for (int i = 0; i < ndrow2; ++i) m_relative[std::size_t(i)] = m_map[std::size_t(rows[i])];
   const int* relative = m_relative.data();
   for (int j = 0; j < ndrow1; ++j) {
-    float* target = block + std::ptrdiff_t(rows[j] - k1) * ld;
-    const float* c = m_c.data() + std::ptrdiff_t(j) * ndrow2;
+    T* target = block + std::ptrdiff_t(rows[j] - k1) * ld;
+    const T* c = m_c.data() + std::ptrdiff_t(j) * ndrow2;
     for (int i = j; i < ndrow2; ++i) target[relative[i]] -= c[i];
   }
 }
 
 // Puts supernode d in the list of the supernode that its rows from pos on reach first (none when it has none).
-void SupernodalFactorizer::link(const SupernodalStructure& L, int d, int pos) {
+template <class T>
+void SupernodalFactorizer<T>::link(const SupernodalStructure& L, int d, int pos) {
   m_pos[std::size_t(d)] = pos;
   if (pos >= L.pi[d + 1] - L.pi[d]) return;
   const int ancestor = m_super_of[std::size_t(L.rows[L.pi[d] + pos])];
   m_next[std::size_t(d)] = m_head[std::size_t(ancestor)];
   m_head[std::size_t(ancestor)] = d;
+}
+
+template class SupernodalFactorizer<float>;
+template class SupernodalFactorizer<double>;
+
+void supernodal_solve(const SupernodalStructure& L, const int* perm, const std::vector<double>& x, double* y,
+                      std::vector<double>& work) {
+  const int n = L.n;
+  work.resize(std::size_t(n));
+  double* w = work.data();
+  for (int k = 0; k < n; ++k) w[k] = y[perm[k]];
+  // L w = w: each column divided by its diagonal, then taken from the rows below.
+  for (int s = 0; s < L.nsuper; ++s) {
+    const int k1 = L.super[s], nscol = L.super[s + 1] - k1, nsrow = L.pi[s + 1] - L.pi[s];
+    const int* rows = L.rows + L.pi[s];
+    const double* block = x.data() + L.px[s];
+    for (int j = 0; j < nscol; ++j) {
+      const double* c = block + std::ptrdiff_t(j) * nsrow;
+      const double v = w[k1 + j] / c[j];
+      w[k1 + j] = v;
+      for (int i = j + 1; i < nsrow; ++i) w[rows[i]] -= c[i] * v;
+    }
+  }
+  // L^T w = w: each column's rows below taken off, then divided by its diagonal; supernodes and columns backwards.
+  for (int s = L.nsuper - 1; s >= 0; --s) {
+    const int k1 = L.super[s], nscol = L.super[s + 1] - k1, nsrow = L.pi[s + 1] - L.pi[s];
+    const int* rows = L.rows + L.pi[s];
+    const double* block = x.data() + L.px[s];
+    for (int j = nscol - 1; j >= 0; --j) {
+      const double* c = block + std::ptrdiff_t(j) * nsrow;
+      double v = w[k1 + j];
+      for (int i = j + 1; i < nsrow; ++i) v -= c[i] * w[rows[i]];
+      w[k1 + j] = v / c[j];
+    }
+  }
+  for (int k = 0; k < n; ++k) y[perm[k]] = w[k];
 }
 
 }  // namespace octocut::sim

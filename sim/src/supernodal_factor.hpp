@@ -1,6 +1,7 @@
 #pragma once
 // The numeric Cholesky factorisation of the PCG preconditioner's lagged factor, in single precision, on CHOLMOD's
-// supernodal symbolic structure (supernodal_solve.hpp). Private to sim/src.
+// supernodal symbolic structure (supernodal_solve.hpp); and in double precision for the small exact solves beside it
+// (the contact region's and the cut bridge's, LocalSolve), with the solve that goes with it. Private to sim/src.
 //
 // The preconditioner reads its factor in single (or half) precision only, so it need not be computed in double:
 // single precision halves the bytes the dense kernels move and doubles their vector width. The algorithm is the
@@ -9,7 +10,9 @@
 // a GEMM per descendant, scattered through a row map), factorises its diagonal block and solves its rows below.
 // The dense kernels are the BLAS's and LAPACK's (OpenBLAS: its single-precision kernels for this CPU) above a size
 // where a call pays for itself, and plain loops below it. Deterministic: one thread, a fixed order of operations.
-// On the meniscus (7k unknowns, 2.3e8 operations) it takes about 9.5 ms where CHOLMOD took 18-20 ms.
+// On the meniscus (7k unknowns, 2.3e8 operations) it takes about 9.5 ms where CHOLMOD took 18-20 ms. On the small
+// regions (a few hundred unknowns, every supernode below the BLAS's size) CHOLMOD's numeric factorisation costs
+// mostly its fixed overhead (permuting A, workspaces, a call per supernode): 0.29 ms for 450 unknowns against 0.1.
 #include <vector>
 
 #include "octocut/sim/types.hpp"
@@ -17,14 +20,16 @@
 
 namespace octocut::sim {
 
+/// T: float (the lagged factor) or double (the small exact solves).
+template <class T>
 class SupernodalFactorizer {
  public:
-  /// Factorises P A P^T = L L^T into `x` (CHOLMOD's layout: px[nsuper] floats; each supernode a column-major
+  /// Factorises P A P^T = L L^T into `x` (CHOLMOD's layout: px[nsuper] values; each supernode a column-major
   /// nsrow x nscol block whose upper triangle is left as it was). A: n x n, both triangles stored (the lower one is
   /// read), compressed and sorted; perm: L's column k is A's column perm[k] (n). False, with x unspecified, when a
-  /// pivot is not positive or anything is not finite (the matrix is not positive definite in single precision), or
+  /// pivot is not positive or anything is not finite (the matrix is not positive definite in T's precision), or
   /// when A has an entry outside L's pattern.
-  bool factorize(const SupernodalStructure& L, const int* perm, const SpMat& A, std::vector<float>& x);
+  bool factorize(const SupernodalStructure& L, const int* perm, const SpMat& A, std::vector<T>& x);
   /// Forgets the assembly planned for A's pattern: call when L's structure or ordering changes (a new analysis),
   /// since the plan is kept while A's pattern stays the same.
   void forget() {
@@ -36,8 +41,8 @@ class SupernodalFactorizer {
  private:
   [[nodiscard]] bool same_pattern(const SpMat& A) const;
   bool plan_assembly(const SupernodalStructure& L, const SpMat& A);
-  bool assemble(const SupernodalStructure& L, const SpMat& A, int s, float* x) const;
-  void update(const SupernodalStructure& L, int s, int d, int pos1, int pos2, const float* x, float* block);
+  bool assemble(const SupernodalStructure& L, const SpMat& A, int s, T* x) const;
+  void update(const SupernodalStructure& L, int s, int d, int pos1, int pos2, const T* x, T* block);
   void link(const SupernodalStructure& L, int d, int pos);
 
   const int* m_perm = nullptr;  ///< L's column k is A's column m_perm[k] (n; during factorize)
@@ -49,8 +54,16 @@ class SupernodalFactorizer {
   std::vector<int> m_head;      ///< per supernode: the first descendant whose next update goes to it, or -1
   std::vector<int> m_next;      ///< per supernode: the next descendant in the same list
   std::vector<int> m_pos;       ///< per supernode: where its rows not yet used for updates begin
-  std::vector<float> m_c;       ///< an update's dense block
+  std::vector<T> m_c;           ///< an update's dense block
   std::vector<int> m_relative;  ///< an update's rows' places in the updated supernode's rows
 };
+
+extern template class SupernodalFactorizer<float>;
+extern template class SupernodalFactorizer<double>;
+
+/// y = (P^T L L^T P)^-1 y in place (n), L's values `x` as SupernodalFactorizer<double> computed them, perm as given
+/// to it; `work` (n) is scratch. Column by column, in double.
+void supernodal_solve(const SupernodalStructure& L, const int* perm, const std::vector<double>& x, double* y,
+                      std::vector<double>& work);
 
 }  // namespace octocut::sim

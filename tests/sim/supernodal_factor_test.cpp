@@ -1,5 +1,6 @@
 // The preconditioner's single-precision supernodal Cholesky factorisation (sim/src/supernodal_factor.hpp) against
-// the dense Cholesky factor of the same permuted matrix, on the supernodal structure CHOLMOD's analysis gives.
+// the dense Cholesky factor of the same permuted matrix, on the supernodal structure CHOLMOD's analysis gives; the
+// double-precision one of the small exact solves and its solve against a dense factor and a dense solve.
 #include <cholmod.h>
 #include <gtest/gtest.h>
 
@@ -85,7 +86,8 @@ class Analysis {
 };
 
 // The factor's values (CHOLMOD's layout) as a dense lower triangle.
-Eigen::MatrixXd dense_factor(const SupernodalStructure& L, const std::vector<float>& x) {
+template <class T>
+Eigen::MatrixXd dense_factor(const SupernodalStructure& L, const std::vector<T>& x) {
   Eigen::MatrixXd D = Eigen::MatrixXd::Zero(L.n, L.n);
   for (int s = 0; s < L.nsuper; ++s) {
     const int nsrow = L.pi[s + 1] - L.pi[s];
@@ -105,6 +107,15 @@ Eigen::MatrixXd permuted(const SpMat& A, const int* perm) {
   return P;
 }
 
+// Every entry of `ours` within `relative` times its column's largest of the exact factor's entry.
+void expect_factor_near(const Eigen::MatrixXd& ours, const Eigen::MatrixXd& exact, double relative) {
+  for (Eigen::Index j = 0; j < exact.cols(); ++j) {
+    const double largest = exact.col(j).cwiseAbs().maxCoeff();
+    for (Eigen::Index i = j; i < exact.rows(); ++i)
+      ASSERT_NEAR(ours(i, j), exact(i, j), relative * largest) << "entry (" << i << ", " << j << ")";
+  }
+}
+
 TEST(SupernodalFactor, MatchesTheDenseCholeskyFactorOfThePermutedMatrix) {
   const SpMat A = grid_system(7, 0.05, 1);
   const Analysis analysis(A);
@@ -113,7 +124,7 @@ TEST(SupernodalFactor, MatchesTheDenseCholeskyFactorOfThePermutedMatrix) {
   int widest = 0;
   for (int s = 0; s < L.nsuper; ++s) widest = std::max(widest, L.super[s + 1] - L.super[s]);
   EXPECT_GE(widest, 48) << "the separators should reach the BLAS's kernels";
-  SupernodalFactorizer factorizer;
+  SupernodalFactorizer<float> factorizer;
   std::vector<float> x;
   ASSERT_TRUE(factorizer.factorize(L, analysis.perm(), A, x));
   const Eigen::MatrixXd PAP = permuted(A, analysis.perm());
@@ -121,11 +132,8 @@ TEST(SupernodalFactor, MatchesTheDenseCholeskyFactorOfThePermutedMatrix) {
   const Eigen::MatrixXd ours = dense_factor(L, x);
   // Single precision: each entry within a few units of roundoff of its column's largest (the matrix is well
   // conditioned: the shift), and L L^T reproduces P A P^T to single precision.
-  for (Eigen::Index j = 0; j < exact.cols(); ++j) {
-    const double largest = exact.col(j).cwiseAbs().maxCoeff();
-    for (Eigen::Index i = j; i < exact.rows(); ++i)
-      ASSERT_NEAR(ours(i, j), exact(i, j), 2e-4 * largest) << "entry (" << i << ", " << j << ")";
-  }
+  expect_factor_near(ours, exact, 2e-4);
+  if (HasFatalFailure()) return;
   EXPECT_LT((ours * ours.transpose() - PAP).norm(), 1e-5 * PAP.norm());
 }
 
@@ -137,7 +145,7 @@ TEST(SupernodalFactor, RefactorisingNewValuesGivesTheBitsOfAFreshFactorisation) 
   B.makeCompressed();
   const Analysis analysis(A);
   ASSERT_TRUE(analysis.ok());
-  SupernodalFactorizer reused, fresh;
+  SupernodalFactorizer<float> reused, fresh;
   std::vector<float> x1, x2, x3;
   ASSERT_TRUE(reused.factorize(analysis.structure(), analysis.perm(), A, x1));
   ASSERT_TRUE(reused.factorize(analysis.structure(), analysis.perm(), B, x2));
@@ -154,7 +162,7 @@ TEST(SupernodalFactor, RefusesIndefiniteAndNonFiniteMatricesAndEntriesOutsideThe
   const Analysis analysis(A);
   ASSERT_TRUE(analysis.ok());
   const SupernodalStructure L = analysis.structure();
-  SupernodalFactorizer factorizer;
+  SupernodalFactorizer<float> factorizer;
   std::vector<float> x;
   ASSERT_TRUE(factorizer.factorize(L, analysis.perm(), A, x));
 
@@ -184,7 +192,7 @@ TEST(SupernodalFactor, ForgettingThePlanFollowsANewAnalysisOfTheSamePattern) {
   const SpMat A = grid_system(5, 0.05, 4);
   const Analysis amd(A), natural(A, true);
   ASSERT_TRUE(amd.ok() && natural.ok());
-  SupernodalFactorizer reused, fresh;
+  SupernodalFactorizer<float> reused, fresh;
   std::vector<float> x1, x2, x3;
   ASSERT_TRUE(reused.factorize(amd.structure(), amd.perm(), A, x1));
   reused.forget();
@@ -192,6 +200,32 @@ TEST(SupernodalFactor, ForgettingThePlanFollowsANewAnalysisOfTheSamePattern) {
   ASSERT_TRUE(fresh.factorize(natural.structure(), natural.perm(), A, x3));
   ASSERT_EQ(x2.size(), x3.size());
   for (std::size_t i = 0; i < x2.size(); ++i) ASSERT_TRUE(x2[i] == x3[i]) << "value " << i;
+}
+
+// In double precision (LocalSolve's region factor), on a pattern small enough for plain loops and on one whose
+// separators reach the BLAS's kernels: the factor within 1e-12 of the dense Cholesky factor of P A P^T (its column's
+// largest entry), and supernodal_solve's x within 1e-10 of a dense solve of A x = b (A's condition number is about
+// 1e3 here), the permutation undone.
+TEST(SupernodalFactor, InDoublePrecisionMatchesTheDenseFactorAndSolve) {
+  for (const int m : {4, 7}) {
+    const SpMat A = grid_system(m, 0.05, 5);
+    const Analysis analysis(A);
+    ASSERT_TRUE(analysis.ok());
+    const SupernodalStructure L = analysis.structure();
+    SupernodalFactorizer<double> factorizer;
+    std::vector<double> x;
+    ASSERT_TRUE(factorizer.factorize(L, analysis.perm(), A, x));
+    const Eigen::MatrixXd PAP = permuted(A, analysis.perm());
+    const Eigen::MatrixXd exact = PAP.llt().matrixL();
+    expect_factor_near(dense_factor(L, x), exact, 1e-12);
+    if (HasFatalFailure()) return;
+    const Eigen::VectorXd b = Eigen::VectorXd::LinSpaced(A.rows(), -1.0, 2.0);
+    const Eigen::VectorXd expected = Eigen::MatrixXd(A).llt().solve(b);
+    Eigen::VectorXd y = b;
+    std::vector<double> work;
+    supernodal_solve(L, analysis.perm(), x, y.data(), work);
+    EXPECT_LT((y - expected).norm(), 1e-10 * expected.norm()) << "m " << m;
+  }
 }
 
 }  // namespace

@@ -139,11 +139,14 @@ struct LinearSolverOptions {
   /// solve. The first factor of a pattern, and the refresh after a solve that fails to converge, are always at once.
   int factor_lag_solves = 0;
   std::string preconditioner = "cholesky";  ///< pcg: "cholesky" (lagged factor) | "jacobi"
-  /// Cholesky factors: order with the better (fewer entries of L) of AMD and CHOLMOD's nested dissection instead of
-  /// AMD alone. The analysis then takes 5-10 ms more (at a few thousand nodes); a blocky 3D mesh gets a factor with
-  /// 20-25 % fewer entries and half the operations (a 10^3 cube), steps 10-30 % faster at 1k-30k elements; the thin
-  /// meniscus keeps AMD's. Worth it where a pattern is used for long: the simulator asks for it for the model it
-  /// starts with, not for the revisions a cut prepares (their analysis is on the cut's path or in the background).
+  /// Cholesky factors: order with the better of AMD and CHOLMOD's nested dissection instead of AMD alone: the one
+  /// whose triangular solves cost less on two threads (the entries of L in the top of the elimination tree, solved by
+  /// one thread, plus those of the larger of the two parts solved side by side). The analysis then takes 5-10 ms more
+  /// (at a few thousand nodes); a blocky 3D mesh gets a factor with 20-25 % fewer entries and half the operations (a
+  /// 10^3 cube), steps 10-30 % faster at 1k-30k elements; the thin meniscus gets as many entries, but half as many in
+  /// the serial top (6 % less time per PCG iteration). Worth it where a pattern is used for long: the simulator asks
+  /// for it for the model it starts with, not for the revisions a cut prepares (their analysis is on the cut's path
+  /// or in the background).
   bool thorough_ordering = false;
 };
 

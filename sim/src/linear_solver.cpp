@@ -139,12 +139,14 @@ class CholmodFactor {
     // AMD; with thorough_ordering also nested dissection (NESDIS), keeping the one whose triangular solves cost the
     // least on two threads: the entries of L in the top of the elimination tree, which one thread solves, plus those
     // of the larger of the two parts solved side by side (SupernodalSolvePlan). On the meniscus the two orderings
-    // give L the same entries (1.28 and 1.33 million), but AMD's tree ends in a chain of 14 supernodes that holds 41 %
-    // of them, NESDIS's in 2 that hold 21 %: 0.84 against 0.91 million on the longer thread, 6 % less time per PCG
-    // iteration. The choice does not depend on the thread count, so neither do the results.
+    // give L about as many entries (1.28 million with AMD, 1.33 with NESDIS), but AMD's tree ends in a chain of 14
+    // supernodes that holds 41 % of them, NESDIS's in 2 that hold 21 %: 0.91 against 0.84 million entries on the
+    // longer thread, and NESDIS's solves take 6 % less time per PCG iteration. The choice does not depend on the
+    // thread count, so neither do the results. When one ordering's analysis fails, the other's stands.
     cholmod_factor* chosen = nullptr;
     double chosen_cost = 0.0;
     bool chosen_is_expanded = false;  // m_L holds the last ordering analysed
+    int failure = CHOLMOD_OK;
     for (const int ordering : {CHOLMOD_AMD, CHOLMOD_NESDIS}) {
       if (ordering == CHOLMOD_NESDIS && !m_thorough) break;
       m_cb.nmethods = 1;
@@ -153,8 +155,8 @@ class CholmodFactor {
       m_cb.method[0].ordering = CHOLMOD_AMD;
       if (Lb == nullptr || m_cb.status < CHOLMOD_OK || !Lb->is_super) {
         if (Lb) cholmod_free_factor(&Lb, &m_cb);
-        if (chosen != nullptr) break;  // the other ordering's analysis stands
-        throw std::runtime_error("CHOLMOD symbolic analysis failed (status " + std::to_string(m_cb.status) + ")");
+        failure = m_cb.status;
+        continue;
       }
       free_factor();
       expand(*Lb, block, n);
@@ -168,6 +170,10 @@ class CholmodFactor {
       } else {
         cholmod_free_factor(&Lb, &m_cb);
       }
+    }
+    if (chosen == nullptr) {
+      free_factor();
+      throw std::runtime_error("CHOLMOD symbolic analysis failed (status " + std::to_string(failure) + ")");
     }
     if (!chosen_is_expanded) {
       free_factor();

@@ -152,6 +152,56 @@ TEST(ContactTerm, SystemBlocksAddToTheMatrixAndToARegionsColumns) {
           << "DOF " << region[i] << ", column " << c;
 }
 
+// Contacts whose samples share their DOFs (embedded in the same element) enter the system summed: one block per pair
+// of their DOF list, in the order of each list's first contact. Against the same contacts passed one at a time (no
+// list to share): the matrix to rounding, the right-hand side bit for bit, with blocks in the band pattern, lumped
+// ones outside it (DOFs 0 and 7) and a constrained DOF (5) whose column moves to the right-hand side.
+TEST(ContactTerm, ContactsSharingTheirDofsEnterTheSystemAsOneBlockPerPair) {
+  const int nd = 12;  // DOFs; block (i, j) is in the pattern when |i - j| <= 2
+  std::vector<Eigen::Triplet<double>> t;
+  for (int i = 0; i < nd; ++i)
+    for (int j = std::max(0, i - 2); j <= std::min(nd - 1, i + 2); ++j)
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) t.emplace_back(3 * i + r, 3 * j + c, 0.0);
+  SpMat pattern(3 * nd, 3 * nd);
+  pattern.setFromTriplets(t.begin(), t.end());
+  pattern.makeCompressed();
+  const std::vector<std::vector<int>> lists = {{1, 2, 3}, {0, 7}, {4, 5, 6}};
+  std::vector<Contact> contacts;
+  for (int k = 0; k < 12; ++k) {
+    Contact c;
+    const std::vector<int>& list = lists[std::size_t(k % 3)];
+    for (std::size_t i = 0; i < list.size(); ++i) c.dofs.push_back({list[i], 0.2 + 0.05 * double((k + int(i)) % 5)});
+    c.normal = Vec3(0.1 * k, 1.0, -0.2).normalized();
+    c.penetration = 1e-4 * (1 + k);
+    c.stiffness = 1e3 * (1 + k % 4);
+    c.damping = 0.01 * c.stiffness;
+    c.friction = 0.3;
+    c.rigid_velocity = Vec3(0.01 * k, 0.0, -0.02);
+    contacts.push_back(c);
+  }
+  std::vector<Vec3> v(static_cast<std::size_t>(nd), Vec3::Zero());
+  for (int d = 0; d < nd; ++d) v[std::size_t(d)] = Vec3(0.001 * d, -0.002, 0.0005 * d);
+  std::vector<char> constrained(std::size_t(nd), 0);
+  constrained[5] = 1;
+  const VecX dv_c = VecX::Constant(3 * nd, 1e-3);
+  const double dt = 2e-3;
+  std::vector<SystemBlock> grouped, single;
+  VecX rhs_grouped = VecX::Zero(3 * nd), rhs_single = VecX::Zero(3 * nd);
+  contact_system_terms(contacts, dt, v, constrained, dv_c, pattern, grouped, rhs_grouped);
+  for (const Contact& c : contacts)
+    contact_system_terms({c}, dt, v, constrained, dv_c, pattern, single, rhs_single);
+  EXPECT_LT(grouped.size(), single.size() / 3);
+  for (Eigen::Index i = 0; i < rhs_single.size(); ++i) ASSERT_TRUE(rhs_grouped[i] == rhs_single[i]) << "row " << i;
+  SpMat with_grouped = pattern, with_single = pattern;
+  add_system_blocks(grouped, with_grouped);
+  add_system_blocks(single, with_single);
+  const Eigen::MatrixXd a(with_grouped), b(with_single);
+  ASSERT_GT(b.norm(), 0.0);
+  EXPECT_LT((a - b).norm(), 1e-13 * b.norm());
+  EXPECT_LT((a - a.transpose()).norm(), 1e-13 * a.norm()) << "the summed blocks keep A symmetric";
+}
+
 TEST(ContactTerm, APenaltyFarTooStiffForAnExplicitStepIsStable) {
   // k = 1e12 Pa/m: a sample of 6 mm^2 and 0.1 g would need dt < 2 sqrt(m / k) = 8 us explicitly; here dt = 2 ms.
   StabilityStats stats;

@@ -85,6 +85,8 @@ struct SystemBlock {
 /// The contact terms of the implicit Euler system of one attempt of length dt: A += dt^2 K_c + dt C_c through each
 /// sample's row, appended to `blocks` as they enter A (blocks outside A's pattern `pattern` are lumped onto the two
 /// diagonals, which keeps A symmetric positive definite), and rhs += dt (f_0 - (dt K_c + C_c)(v_sample - v_rigid)).
+/// The blocks of contacts with the same list of DOFs (samples embedded in the same element) are summed per pair, in
+/// the order of each list's first contact; rhs receives every contact's terms in the contacts' order.
 /// Rows and columns of constrained DOFs are left alone (their coupling moves to rhs with the prescribed increments
 /// dv_c). `pattern` is the system matrix's pattern (3 num_dofs square, both triangles), v the DOF velocities
 /// (num_dofs).

@@ -149,26 +149,39 @@ void contact_system_terms(const std::vector<Contact>& contacts, double dt, const
     const std::vector<ContactDof>* dofs;  // the first contact's
     std::vector<Mat3> sum;                // per pair (p, q) of the list: the blocks, or the lumped block
     std::vector<signed char> kind;        // per pair: 0 none (a constrained row or column), 1 block, 2 lumped
+    int next = -1;                        // the next group whose list starts with the same DOF
   };
-  thread_local std::vector<Group> groups;  // reused: their storage stays allocated between steps
+  // Reused, so that their storage stays allocated between steps: the groups, and per DOF the first group whose list
+  // starts with it (-1 between calls), so that finding a contact's group compares only lists with its first DOF.
+  thread_local std::vector<Group> groups;
+  thread_local std::vector<int> starting;
+  starting.resize(constrained.size(), -1);
   std::size_t used = 0;
+  struct Reset {  // back to -1 on every way out, a throw included
+    const std::size_t& used;
+    ~Reset() {
+      for (std::size_t g = 0; g < used; ++g) starting[std::size_t(groups[g].dofs->front().dof)] = -1;
+    }
+  } reset{used};
   const auto same_dofs = [](const std::vector<ContactDof>& a, const std::vector<ContactDof>& b) {
     const auto same = [](const ContactDof& x, const ContactDof& y) { return x.dof == y.dof; };
     return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), same);
   };
   for (const Contact& c : contacts) {
+    if (c.dofs.empty()) continue;  // a sample with no row moves nothing
     Mat3 K, C;
     Vec3 f0;
     const Vec3 rel = row_value(c.dofs, v) - c.rigid_velocity;
     contact_terms(c, rel, K, C, f0);
     const Mat3 S = dt * dt * K + dt * C;  // the system matrix block of a unit row
     const Vec3 f = dt * (f0 - (dt * K + C) * rel);
-    std::size_t g = 0;
-    while (g < used && !same_dofs(*groups[g].dofs, c.dofs)) ++g;
+    int& first = starting[std::size_t(c.dofs.front().dof)];
+    int found = first;
+    while (found >= 0 && !same_dofs(*groups[std::size_t(found)].dofs, c.dofs)) found = groups[std::size_t(found)].next;
     const std::size_t n = c.dofs.size();
-    if (g == used) {  // a new list: which of its pairs enter A, and how
+    if (found < 0) {  // a new list: which of its pairs enter A, and how (counted in `used` once complete)
       if (groups.size() == used) groups.emplace_back();
-      Group& group = groups[used++];
+      Group& group = groups[used];
       group.dofs = &c.dofs;
       group.sum.assign(n * n, Mat3::Zero());
       group.kind.assign(n * n, 0);
@@ -178,8 +191,10 @@ void contact_system_terms(const std::vector<Contact>& contacts, double dt, const
           if (constrained[std::size_t(p)] || constrained[std::size_t(q)]) continue;
           group.kind[i * n + j] = has_block(pattern, p, q) ? 1 : 2;
         }
+      group.next = first;
+      found = first = int(used++);
     }
-    Group& group = groups[g];
+    Group& group = groups[std::size_t(found)];
     for (std::size_t i = 0; i < n; ++i) {
       const ContactDof& p = c.dofs[i];
       if (constrained[std::size_t(p.dof)]) continue;

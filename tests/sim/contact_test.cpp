@@ -93,19 +93,27 @@ TEST(ContactTerm, ABlockOnAPlaneCarriesItsWeight) {
   EXPECT_EQ(stats.recoveries, 0);
 }
 
-// The contacts' system blocks (add_system_blocks) against a dense sum: into a 3 x 3 blocked matrix, and into the
-// columns of a region of DOFs (what the contact's exact solve takes), each entry receiving its blocks in the list's
-// order; blocks outside the pattern, or whose column is not in the region, are left out.
-TEST(ContactTerm, SystemBlocksAddToTheMatrixAndToARegionsColumns) {
-  const int nd = 12;  // DOFs; block (i, j) is in the pattern when |i - j| <= 2
+// A 3 x 3 blocked matrix of nd DOFs whose block (i, j) is in the pattern when |i - j| <= 2, entry (row, col) being
+// value(row, col).
+template <class Value>
+SpMat band_blocks(int nd, const Value& value) {
   std::vector<Eigen::Triplet<double>> t;
   for (int i = 0; i < nd; ++i)
     for (int j = std::max(0, i - 2); j <= std::min(nd - 1, i + 2); ++j)
       for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 3; ++c) t.emplace_back(3 * i + r, 3 * j + c, 0.01 * (3 * i + r) - 0.003 * (3 * j + c));
+        for (int c = 0; c < 3; ++c) t.emplace_back(3 * i + r, 3 * j + c, value(3 * i + r, 3 * j + c));
   SpMat A(3 * nd, 3 * nd);
   A.setFromTriplets(t.begin(), t.end());
   A.makeCompressed();
+  return A;
+}
+
+// The contacts' system blocks (add_system_blocks) against a dense sum: into a 3 x 3 blocked matrix, and into the
+// columns of a region of DOFs (what the contact's exact solve takes), each entry receiving its blocks in the list's
+// order; blocks outside the pattern, or whose column is not in the region, are left out.
+TEST(ContactTerm, SystemBlocksAddToTheMatrixAndToARegionsColumns) {
+  const int nd = 12;
+  const SpMat A = band_blocks(nd, [](int row, int col) { return 0.01 * row - 0.003 * col; });
   std::vector<SystemBlock> blocks;
   std::uint32_t seed = 12345u;
   const auto next = [&seed] { return (seed = seed * 1664525u + 1013904223u) >> 8; };
@@ -157,15 +165,8 @@ TEST(ContactTerm, SystemBlocksAddToTheMatrixAndToARegionsColumns) {
 // list to share): the matrix to rounding, the right-hand side bit for bit, with blocks in the band pattern, lumped
 // ones outside it (DOFs 0 and 7) and a constrained DOF (5) whose column moves to the right-hand side.
 TEST(ContactTerm, ContactsSharingTheirDofsEnterTheSystemAsOneBlockPerPair) {
-  const int nd = 12;  // DOFs; block (i, j) is in the pattern when |i - j| <= 2
-  std::vector<Eigen::Triplet<double>> t;
-  for (int i = 0; i < nd; ++i)
-    for (int j = std::max(0, i - 2); j <= std::min(nd - 1, i + 2); ++j)
-      for (int r = 0; r < 3; ++r)
-        for (int c = 0; c < 3; ++c) t.emplace_back(3 * i + r, 3 * j + c, 0.0);
-  SpMat pattern(3 * nd, 3 * nd);
-  pattern.setFromTriplets(t.begin(), t.end());
-  pattern.makeCompressed();
+  const int nd = 12;
+  const SpMat pattern = band_blocks(nd, [](int, int) { return 0.0; });
   const std::vector<std::vector<int>> lists = {{1, 2, 3}, {0, 7}, {4, 5, 6}};
   std::vector<Contact> contacts;
   for (int k = 0; k < 12; ++k) {

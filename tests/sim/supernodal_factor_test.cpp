@@ -204,8 +204,7 @@ TEST(SupernodalFactor, ForgettingThePlanFollowsANewAnalysisOfTheSamePattern) {
 
 // In double precision (LocalSolve's region factor), on a pattern small enough for plain loops and on one whose
 // separators reach the BLAS's kernels: the factor within 1e-12 of the dense Cholesky factor of P A P^T (its column's
-// largest entry), and supernodal_solve's x within 1e-10 of a dense solve of A x = b (A's condition number is about
-// 1e3 here), the permutation undone.
+// largest entry), and supernodal_solve's x within 1e-10 of a dense solve of A x = b, the permutation undone.
 TEST(SupernodalFactor, InDoublePrecisionMatchesTheDenseFactorAndSolve) {
   for (const int m : {4, 7}) {
     const SpMat A = grid_system(m, 0.05, 5);

@@ -289,7 +289,11 @@ class CholmodFactor {
   void free_factor() {
     if (m_L) cholmod_free_factor(&m_L, &m_c);
     m_L = nullptr;
-    m_single = PackedFactor{};
+    // Emptied, its storage kept for the next analysis's factor (assign_with_room).
+    m_single.values.clear();
+    m_single.codes.clear();
+    m_single.diag_inv.clear();
+    m_single.scale.clear();
     m_have_double = m_double_only = false;
     m_factorizer.forget();  // its assembly plan is for this analysis
   }
@@ -700,6 +704,8 @@ class CutBridge {
       : m_factor(std::move(factor)), m_transfer(std::move(transfer)) {}
   /// The old revision's factor (its operation counts price the new pattern's first factor until that is analysed).
   [[nodiscard]] const CholmodFactor& old_factor() const { return *m_factor; }
+  /// Hands the old revision's factor over (the bridge is not to be applied after), for its storage.
+  std::unique_ptr<CholmodFactor> release_factor() { return std::move(m_factor); }
   /// Prepares for A (3 x 3 blocked, new DOFs as T's rows), unless given its local solve already (set_local).
   /// False when it cannot: then nothing uses it.
   bool build(SystemOperator& A) {
@@ -887,6 +893,11 @@ class PcgSolver final : public LinearSolver {
     // Its spare matrix's storage, emptied (the pattern is the old one's), for the new pattern's first factor.
     m_spare_matrix.swap(old->m_spare_matrix);
     m_spare_matrix.resize(0, 0);  // keeps the allocation
+    // And its spare factor's, emptied, for the same: the new pattern's first factor fills it in the background.
+    if (old->m_back) {
+      old->m_back->clear();
+      m_back = std::move(old->m_back);
+    }
     old->m_front = std::make_unique<CholmodFactor>();
     old->m_have_factor = false;
   }
@@ -1047,7 +1058,10 @@ class PcgSolver final : public LinearSolver {
       m_rent = purchase_price();
       return;
     }
-    m_back = std::move(m_front);
+    // The spare is the old front; while bridging, that was never analysed, and the old revision's factor, which
+    // the bridge no longer needs, takes its place, emptied, for its storage.
+    m_back = m_bridging ? m_bridge->release_factor() : std::move(m_front);
+    if (m_bridging) m_back->clear();
     m_front = std::move(factor);
     m_fast_front = std::move(fast);
     m_rotations_front = std::move(rotations);

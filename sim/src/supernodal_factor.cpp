@@ -127,7 +127,7 @@ bool SupernodalFactorizer<T>::factorize(const SupernodalStructure& L, const int*
   m_head.assign(std::size_t(L.nsuper), -1);
   m_next.assign(std::size_t(L.nsuper), -1);
   m_pos.assign(std::size_t(L.nsuper), 0);
-  x.assign(std::size_t(L.px[L.nsuper]), T(0));
+  assign_with_room(x, std::size_t(L.px[L.nsuper]), T(0));
   for (int s = 0; s < L.nsuper; ++s) {
     const int nscol = L.super[s + 1] - L.super[s], nsrow = L.pi[s + 1] - L.pi[s];
     const int* rows = L.rows + L.pi[s];
@@ -179,7 +179,7 @@ bool SupernodalFactorizer<T>::plan_assembly(const SupernodalStructure& L, const 
   const int* inner = A.innerIndexPtr();
   m_outer.clear();
   m_inner.clear();
-  m_dest.assign(std::size_t(A.nonZeros()), -1);
+  assign_with_room(m_dest, std::size_t(A.nonZeros()), -1L);
   for (int s = 0; s < L.nsuper; ++s) {
     const int k1 = L.super[s], nsrow = L.pi[s + 1] - L.pi[s];
     const int* rows = L.rows + L.pi[s];
@@ -198,8 +198,8 @@ bool SupernodalFactorizer<T>::plan_assembly(const SupernodalStructure& L, const 
     for (int i = 0; i < nsrow; ++i) m_map[std::size_t(rows[i])] = -1;
     if (!inside) return false;
   }
-  m_outer.assign(outer, outer + A.cols() + 1);
-  m_inner.assign(inner, inner + A.nonZeros());
+  assign_with_room(m_outer, outer, outer + A.cols() + 1);
+  assign_with_room(m_inner, inner, inner + A.nonZeros());
   return true;
 }
 

@@ -139,13 +139,13 @@ template <class T>
 void SupernodalSolvePlan::pack_values(const SupernodalStructure& L, const T* x, bool half, PackedFactor& packed) const {
   if (half) {
     std::vector<float>().swap(packed.values);
-    packed.codes.assign(packed_size(), 0);
+    assign_with_room(packed.codes, packed_size(), std::uint16_t(0));
   } else {
     std::vector<std::uint16_t>().swap(packed.codes);
-    packed.values.assign(packed_size(), 0.0f);
+    assign_with_room(packed.values, packed_size(), 0.0f);
   }
-  packed.diag_inv.assign(std::size_t(L.n), 0.0f);
-  packed.scale.assign(std::size_t(L.n), 1.0f);
+  assign_with_room(packed.diag_inv, std::size_t(L.n), 0.0f);
+  assign_with_room(packed.scale, std::size_t(L.n), 1.0f);
   for (int s = 0; s < L.nsuper; ++s) {
     const int nscol = L.super[s + 1] - L.super[s], nsrow = L.pi[s + 1] - L.pi[s], ld = leading_dimension(nsrow);
     for (int j = 0; j < nscol; ++j) {

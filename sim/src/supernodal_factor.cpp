@@ -127,11 +127,19 @@ bool SupernodalFactorizer<T>::factorize(const SupernodalStructure& L, const int*
   m_head.assign(std::size_t(L.nsuper), -1);
   m_next.assign(std::size_t(L.nsuper), -1);
   m_pos.assign(std::size_t(L.nsuper), 0);
-  assign_with_room(x, std::size_t(L.px[L.nsuper]), T(0));
+  // Each supernode's block is zeroed when its turn comes (below): it is then in the cache for its assembly and
+  // updates, where zeroing all of x first streamed it through memory once more.
+  const auto size = std::size_t(L.px[L.nsuper]);
+  if (x.capacity() < size) {
+    x.clear();
+    x.reserve(size + size / 8);
+  }
+  x.resize(size);
   for (int s = 0; s < L.nsuper; ++s) {
     const int nscol = L.super[s + 1] - L.super[s], nsrow = L.pi[s + 1] - L.pi[s];
     const int* rows = L.rows + L.pi[s];
     T* block = x.data() + L.px[s];
+    std::fill(block, block + std::ptrdiff_t(nscol) * nsrow, T(0));
     for (int i = 0; i < nsrow; ++i) m_map[std::size_t(rows[i])] = i;
     const bool ok = assemble(L, A, s, x.data());
     // The descendants whose next rows fall in this supernode's columns (each then moves on to its next ancestor).
@@ -171,15 +179,19 @@ bool SupernodalFactorizer<T>::same_pattern(const SpMat& A) const {
          std::memcmp(m_inner.data(), A.innerIndexPtr(), nnz * sizeof(int)) == 0;
 }
 
-// Where each of A's entries goes in L's values (m_dest: -1 for the upper triangle of P A P^T); false when an entry
-// lies outside L's pattern.
+// Where each of A's entries on and below the diagonal of P A P^T goes in L's values, by supernode (m_begin,
+// m_source, m_dest); false when an entry lies outside L's pattern.
 template <class T>
 bool SupernodalFactorizer<T>::plan_assembly(const SupernodalStructure& L, const SpMat& A) {
   const int* outer = A.outerIndexPtr();
   const int* inner = A.innerIndexPtr();
   m_outer.clear();
   m_inner.clear();
-  assign_with_room(m_dest, std::size_t(A.nonZeros()), -1L);
+  m_begin.assign(std::size_t(L.nsuper) + 1, 0);
+  m_source.clear();
+  m_dest.clear();
+  m_source.reserve(std::size_t(A.nonZeros()) / 2 + std::size_t(L.n));
+  m_dest.reserve(m_source.capacity());
   for (int s = 0; s < L.nsuper; ++s) {
     const int k1 = L.super[s], nsrow = L.pi[s + 1] - L.pi[s];
     const int* rows = L.rows + L.pi[s];
@@ -192,11 +204,13 @@ bool SupernodalFactorizer<T>::plan_assembly(const SupernodalStructure& L, const 
         if (i < k) continue;
         const int at = m_map[std::size_t(i)];
         inside = inside && at >= 0;
-        m_dest[std::size_t(t)] = long(L.px[s]) + long(k - k1) * nsrow + at;
+        m_source.push_back(t);
+        m_dest.push_back(long(L.px[s]) + long(k - k1) * nsrow + at);
       }
     }
     for (int i = 0; i < nsrow; ++i) m_map[std::size_t(rows[i])] = -1;
     if (!inside) return false;
+    m_begin[std::size_t(s) + 1] = int(m_source.size());
   }
   assign_with_room(m_outer, outer, outer + A.cols() + 1);
   assign_with_room(m_inner, inner, inner + A.nonZeros());
@@ -207,17 +221,13 @@ bool SupernodalFactorizer<T>::plan_assembly(const SupernodalStructure& L, const 
 // plan_assembly); false for a non-finite one.
 template <class T>
 bool SupernodalFactorizer<T>::assemble(const SupernodalStructure& L, const SpMat& A, int s, T* x) const {
-  const int* outer = A.outerIndexPtr();
+  (void)L;
   const double* values = A.valuePtr();
   bool finite = true;
-  for (int k = L.super[s]; k < L.super[s + 1]; ++k) {
-    const int j = m_perm[k];
-    for (int t = outer[j]; t < outer[j + 1]; ++t) {
-      const long at = m_dest[std::size_t(t)];
-      if (at < 0) continue;
-      finite = finite && std::isfinite(values[t]);
-      x[at] += T(values[t]);
-    }
+  for (int p = m_begin[std::size_t(s)]; p < m_begin[std::size_t(s) + 1]; ++p) {
+    const double v = values[m_source[std::size_t(p)]];
+    finite = finite && std::isfinite(v);
+    x[m_dest[std::size_t(p)]] += T(v);
   }
   return finite;
 }

@@ -35,6 +35,8 @@ class SupernodalFactorizer {
   void forget() {
     m_outer.clear();
     m_inner.clear();
+    m_begin.clear();
+    m_source.clear();
     m_dest.clear();
   }
 
@@ -48,8 +50,12 @@ class SupernodalFactorizer {
   const int* m_perm = nullptr;  ///< L's column k is A's column m_perm[k] (n; during factorize)
   std::vector<int> m_iperm;     ///< A's column j is L's column m_iperm[j] (n)
   std::vector<int> m_super_of;  ///< supernode of each column of L (n)
-  std::vector<int> m_outer, m_inner;  ///< the pattern of A that m_dest was planned for
-  std::vector<long> m_dest;           ///< per entry of A: its place in L's values, -1 when not assembled
+  std::vector<int> m_outer, m_inner;  ///< the pattern of A that the assembly was planned for
+  // The assembly: supernode s takes A's values m_source[p] into L's values at m_dest[p] for p in
+  // m_begin[s] .. m_begin[s + 1) (the entries on and below the diagonal of P A P^T in its columns).
+  std::vector<int> m_begin;   ///< nsuper + 1
+  std::vector<int> m_source;  ///< indices into A's values
+  std::vector<long> m_dest;   ///< indices into L's values
   std::vector<int> m_map;       ///< row of L -> its place in the current supernode's rows, -1 elsewhere (n)
   std::vector<int> m_head;      ///< per supernode: the first descendant whose next update goes to it, or -1
   std::vector<int> m_next;      ///< per supernode: the next descendant in the same list

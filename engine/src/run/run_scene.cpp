@@ -98,6 +98,7 @@ class Run {
       }
       if (m_render && i % m_world.scene().render.every == 0) render_frame();
       if (m_world.scene().output.contact_forces) append_contact_rows(step.t);
+      if (m_world.scene().output.step_times) append_step_row(step);
       if (tty && (sim::ms_since(last_progress) > 200.0 || !running())) {
         last_progress = sim::Clock::now();
         print_progress(step);
@@ -135,6 +136,13 @@ class Run {
     }
     Report report = m_world.report();
     for (std::string& w : m_warnings) report.warnings.push_back(std::move(w));
+    if (m_world.scene().output.step_times) {  // also after a failure: the steps up to it
+      try {
+        write_file_atomic(m_out / "steps.csv", std::string(kStepTimesHeader) + m_steps_csv);
+      } catch (const std::exception& e) {
+        report.warnings.push_back(std::string("steps.csv not written: ") + e.what());
+      }
+    }
     report.subsystems.renderer = m_render != nullptr;
     report.subsystems.frame_writer = m_writer != nullptr;
     if (m_writer) {
@@ -159,6 +167,19 @@ class Run {
  private:
   [[nodiscard]] PlyPrecision ply_precision() const {
     return m_world.scene().output.ply_float ? PlyPrecision::single : PlyPrecision::double_;
+  }
+
+  // The steps.csv row of the step just run (see the schema's output.step_times).
+  void append_step_row(const StepResult& step) {
+    const sim::Simulator& sim = m_world.simulator();
+    const sim::StepProfile& p = sim.profile();
+    const sim::SolveInfo& solve = sim.last_solve();
+    char row[512];
+    std::snprintf(row, sizeof row, "%ld,%.17g,%.17g,%zu,%d,%d,%d,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n",
+                  m_world.steps(), step.t, step.ms, step.cuts.size(), solve.iterations, int(solve.refactorized),
+                  int(solve.background), p.rotations, p.forces, p.assembly, p.contact, p.solve,
+                  m_world.contact_timing().queries);
+    m_steps_csv += row;
   }
 
   // One contact_forces.csv row per colliding tool and rigid body after the step that ended at t.
@@ -234,6 +255,7 @@ class Run {
 
   World& m_world;
   std::string m_contact_csv;  // contact_forces.csv so far
+  std::string m_steps_csv;    // steps.csv's rows so far
   const RunOptions& m_options;
   fs::path m_out;
   // Snapshots queued for the render thread at most: memory stays bounded, and a renderer slower than the simulation

@@ -608,6 +608,7 @@ Scene to_scene(const json& document, const std::string& file, bool duration_give
   scene.output.surface_every = document["output"]["surface_every"].get<int>();
   scene.output.ply_float = document["output"]["ply_precision"].get<std::string>() == "float";
   scene.output.contact_forces = document["output"]["contact_forces"].get<bool>();
+  scene.output.step_times = document["output"]["step_times"].get<bool>();
   scene.output.stability_track = document["output"]["stability_track"].get<bool>();
   // The expected block stays JSON text (validated by the schema); see expected.hpp.
   if (document.contains("expected")) scene.expected_json = document["expected"].dump();

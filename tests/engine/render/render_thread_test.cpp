@@ -11,6 +11,7 @@
 #include <chrono>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -250,6 +251,7 @@ TEST_F(RenderThreadRun, SigintStopsTheRunAndJoinsTheThreadWithEveryFrameWhole) {
   // A long run, interrupted once two frames are on disk: the run fails with its report, the render thread is joined,
   // and the frames on disk are 0..n-1 without a gap, each a whole PNG, as many as the report says were written.
   m_scene.duration = 1000.0;  // far longer than the wait below
+  m_scene.output.step_times = true;
   RunOptions options;
   options.out_dir = (m_dir / "out").string();
   std::thread interrupter([&] {
@@ -275,6 +277,12 @@ TEST_F(RenderThreadRun, SigintStopsTheRunAndJoinsTheThreadWithEveryFrameWhole) {
     const fs::path file = frame_path(m_dir / "out/frames", i);
     EXPECT_EQ(decode_png(read_file(file), file.string()).width, 128) << file;
   }
+  // steps.csv is written after a failure too: the header and a row for each step run.
+  std::istringstream steps(read_file(m_dir / "out/steps.csv"));
+  long lines = 0;
+  for (std::string line; std::getline(steps, line);) ++lines;
+  EXPECT_EQ(lines, report["steps"].get<long>() + 1);
+  EXPECT_GE(lines, 2);
 }
 
 TEST_F(RenderThreadRun, ARendererThatCannotStartFailsBeforeTheFirstStep) {

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "common/report_util.hpp"
 #include "common/shapes.hpp"
 #include "common/temp_dir.hpp"
 #include "octocut/engine/io/mesh_io.hpp"
@@ -463,6 +464,56 @@ TEST_F(WorldTest, RunSceneIsTheSameLoopOverWorld) {
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   EXPECT_NE(text.find("\"subsystems\""), std::string::npos);
   EXPECT_NE(text.find("\"octocut_version\""), std::string::npos);
+}
+
+// output.step_times: steps.csv holds a row per step, numbered and timed as the report counts and times them: the
+// report's timing_ms.step summarises its ms column (the same values, nearest-rank), the stages fit in the step, and
+// the cut shows in the row of the step that ran it.
+TEST_F(WorldTest, StepTimesHaveARowPerStepThatTheReportSummarises) {
+  RunOptions o;
+  o.out_dir = (m_dir / "steps").string();
+  o.no_render = true;
+  const RunResult r = run_scene(scene(kCube, {"/output/step_times=true"}), o);
+  ASSERT_EQ(r.exit_code, 0) << r.error;
+  std::ifstream in(m_dir / "steps" / "steps.csv");
+  std::string line;
+  ASSERT_TRUE(std::getline(in, line));
+  EXPECT_EQ(line + "\n", kStepTimesHeader);
+  std::vector<double> ms;
+  long cut_rows = 0, cut_step = 0;
+  while (std::getline(in, line)) {
+    std::vector<double> f;
+    std::size_t at = 0;
+    while (at <= line.size()) {
+      const std::size_t end = std::min(line.find(',', at), line.size());
+      f.push_back(std::stod(line.substr(at, end - at)));
+      at = end + 1;
+    }
+    ASSERT_EQ(f.size(), 13u) << line;
+    EXPECT_EQ(long(f[0]), long(ms.size()) + 1) << line;
+    EXPECT_NEAR(f[1], 0.001 * double(ms.size() + 1), 1e-12) << line;  // t at the step's end, dt = 1 ms
+    EXPECT_GE(f[4], 0.0) << line;
+    double stages = 0.0;
+    for (const std::size_t k : {7u, 8u, 9u, 10u, 11u, 12u}) {
+      EXPECT_GE(f[k], 0.0) << line;
+      stages += f[k];
+    }
+    EXPECT_LE(stages, f[2]) << line;
+    if (f[3] > 0.0) {
+      cut_rows += 1;
+      cut_step = long(f[0]);
+    }
+    ms.push_back(f[2]);
+  }
+  const nlohmann::json report = test::read_json(m_dir / "steps" / "report.json");
+  ASSERT_EQ(long(ms.size()), report["steps"].get<long>());
+  EXPECT_EQ(ms.size(), 10u);
+  EXPECT_EQ(cut_rows, 1);
+  EXPECT_EQ(cut_step, 5);  // the punch's cut at t = 5 ms runs after the step that ends there
+  const TimingSummary t = TimingSummary::of(ms);
+  EXPECT_EQ(t.median, report["timing_ms"]["step"]["median"].get<double>());
+  EXPECT_EQ(t.p95, report["timing_ms"]["step"]["p95"].get<double>());
+  EXPECT_EQ(t.max, report["timing_ms"]["step"]["max"].get<double>());
 }
 
 // The 20-punch slab: the first punch has no earlier cut to snap to; every re-punch at the same spot (the slab sags a

@@ -27,6 +27,12 @@ struct RunOptions {
   std::function<std::unique_ptr<Renderer>()> renderer_factory;
 };
 
+/// The header of steps.csv (`output.step_times`): one row per step, the stages' times in ms (sim::StepProfile) and
+/// the contact queries' (ContactTiming::queries).
+inline constexpr const char* kStepTimesHeader =
+    "step,t,ms,cuts,pcg_iterations,refactorized,background,rotations_ms,forces_ms,assembly_ms,contact_ms,solve_ms,"
+    "queries_ms\n";
+
 /// What a run ended with.
 struct RunResult {
   int exit_code = 0;             ///< 0 ok, 1 the run failed (report written when possible), 2 bad input

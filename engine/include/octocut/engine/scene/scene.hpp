@@ -151,6 +151,7 @@ struct OutputSettings {
   int surface_every = 0;
   bool ply_float = false;  ///< PLY files in float32 instead of float64 (`ply_precision`)
   bool contact_forces = false;  ///< contact_forces.csv: t,name,fx,fy,fz,max_penetration_m per step and collider
+  bool step_times = false;      ///< steps.csv: each step's wall time and where it went (kStepTimesHeader)
   bool stability_track = false;  ///< report stability.track (energy, displacement, volume every step)
 };
 

@@ -141,7 +141,7 @@ bool SupernodalFactorizer<T>::factorize(const SupernodalStructure& L, const int*
     T* block = x.data() + L.px[s];
     std::fill(block, block + std::ptrdiff_t(nscol) * nsrow, T(0));
     for (int i = 0; i < nsrow; ++i) m_map[std::size_t(rows[i])] = i;
-    const bool ok = assemble(L, A, s, x.data());
+    const bool ok = assemble(A, s, x.data());
     // The descendants whose next rows fall in this supernode's columns (each then moves on to its next ancestor).
     for (int d = m_head[std::size_t(s)]; ok && d >= 0;) {
       const int next = m_next[std::size_t(d)];
@@ -220,8 +220,7 @@ bool SupernodalFactorizer<T>::plan_assembly(const SupernodalStructure& L, const 
 // Adds A's entries of supernode s's columns on and below the diagonal (of P A P^T) into L's values x (planned by
 // plan_assembly); false for a non-finite one.
 template <class T>
-bool SupernodalFactorizer<T>::assemble(const SupernodalStructure& L, const SpMat& A, int s, T* x) const {
-  (void)L;
+bool SupernodalFactorizer<T>::assemble(const SpMat& A, int s, T* x) const {
   const double* values = A.valuePtr();
   bool finite = true;
   for (int p = m_begin[std::size_t(s)]; p < m_begin[std::size_t(s) + 1]; ++p) {

@@ -43,7 +43,7 @@ class SupernodalFactorizer {
  private:
   [[nodiscard]] bool same_pattern(const SpMat& A) const;
   bool plan_assembly(const SupernodalStructure& L, const SpMat& A);
-  bool assemble(const SupernodalStructure& L, const SpMat& A, int s, T* x) const;
+  bool assemble(const SpMat& A, int s, T* x) const;
   void update(const SupernodalStructure& L, int s, int d, int pos1, int pos2, const T* x, T* block);
   void link(const SupernodalStructure& L, int d, int pos);
 

@@ -174,11 +174,15 @@ class Run {
     const sim::Simulator& sim = m_world.simulator();
     const sim::StepProfile& p = sim.profile();
     const sim::SolveInfo& solve = sim.last_solve();
+    const sim::StabilityStats& st = sim.stats();
     char row[512];
-    std::snprintf(row, sizeof row, "%ld,%.17g,%.17g,%zu,%d,%d,%d,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n",
+    std::snprintf(row, sizeof row, "%ld,%.17g,%.17g,%zu,%d,%d,%d,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%d,%d\n",
                   m_world.steps(), step.t, step.ms, step.cuts.size(), solve.iterations, int(solve.refactorized),
                   int(solve.background), p.rotations, p.forces, p.assembly, p.contact, p.solve,
-                  m_world.contact_timing().queries);
+                  m_world.contact_timing().queries, st.recoveries - m_recoveries,
+                  st.energy_rejections - m_energy_rejections);
+    m_recoveries = st.recoveries;
+    m_energy_rejections = st.energy_rejections;
     m_steps_csv += row;
   }
 
@@ -256,6 +260,7 @@ class Run {
   World& m_world;
   std::string m_contact_csv;  // contact_forces.csv so far
   std::string m_steps_csv;    // steps.csv's rows so far
+  int m_recoveries = 0, m_energy_rejections = 0;  // the simulator's counts at the last steps.csv row
   const RunOptions& m_options;
   fs::path m_out;
   // Snapshots queued for the render thread at most: memory stays bounded, and a renderer slower than the simulation

@@ -493,13 +493,14 @@ Entry make_scene_schema() {
                                     "`t,name,fx,fy,fz,max_penetration_m` (the force the tissue exerts on it, N)."),
                             boolean("step_times", false,
                                     "Write `steps.csv`: one row per step, `step,t,ms,cuts,pcg_iterations,refactorized,"
-                                    "background,rotations_ms,forces_ms,assembly_ms,contact_ms,solve_ms,queries_ms`: the "
-                                    "step's number, its end time (s), its wall time with its cuts (ms; the report's "
-                                    "`timing_ms.step` summarises these), the cut events it ran, its PCG iterations, "
-                                    "whether a factor was put in place (1) and whether a background refresh computed "
-                                    "it (1), and its stages (ms): rotations, forces, assembly, contact terms, the "
-                                    "linear solve and the contact queries. Timings differ from run to run; written "
-                                    "also when the run fails."),
+                                    "background,rotations_ms,forces_ms,assembly_ms,contact_ms,solve_ms,queries_ms,"
+                                    "recoveries,energy_rejections`: the step's number, its end time (s), its wall time "
+                                    "with its cuts (ms; the report's `timing_ms.step` summarises these), the cut events "
+                                    "it ran, its PCG iterations, whether a factor was put in place (1) and whether a "
+                                    "background refresh computed it (1), its stages (ms; of its last attempt): "
+                                    "rotations, forces, assembly, contact terms, the linear solve and the contact "
+                                    "queries, and the attempts it rolled back (the report's `stability` counts, per "
+                                    "step). Timings differ from run to run; written also when the run fails."),
                             integer("surface_every", 0, closed(0, max_int),
                                     "Write the deformed surface every N steps as `surfaces/surface_<step>.ply` "
                                     "(6 digits, binary PLY, metres), and the rest surface once; 0: never."),

@@ -467,8 +467,8 @@ TEST_F(WorldTest, RunSceneIsTheSameLoopOverWorld) {
 }
 
 // output.step_times: steps.csv holds a row per step, numbered and timed as the report counts and times them: the
-// report's timing_ms.step summarises its ms column (the same values, nearest-rank), the stages fit in the step, and
-// the cut shows in the row of the step that ran it.
+// report's timing_ms.step summarises its ms column (the same values, nearest-rank), the stages fit in the step, the
+// cut shows in the row of the step that ran it, and the rolled-back attempts add up to the report's counts.
 TEST_F(WorldTest, StepTimesHaveARowPerStepThatTheReportSummarises) {
   RunOptions o;
   o.out_dir = (m_dir / "steps").string();
@@ -480,7 +480,7 @@ TEST_F(WorldTest, StepTimesHaveARowPerStepThatTheReportSummarises) {
   ASSERT_TRUE(std::getline(in, line));
   EXPECT_EQ(line + "\n", kStepTimesHeader);
   std::vector<double> ms;
-  long cut_rows = 0, cut_step = 0;
+  long cut_rows = 0, cut_step = 0, recoveries = 0, rejections = 0;
   while (std::getline(in, line)) {
     std::vector<double> f;
     std::size_t at = 0;
@@ -489,7 +489,7 @@ TEST_F(WorldTest, StepTimesHaveARowPerStepThatTheReportSummarises) {
       f.push_back(std::stod(line.substr(at, end - at)));
       at = end + 1;
     }
-    ASSERT_EQ(f.size(), 13u) << line;
+    ASSERT_EQ(f.size(), 15u) << line;
     EXPECT_EQ(long(f[0]), long(ms.size()) + 1) << line;
     EXPECT_NEAR(f[1], 0.001 * double(ms.size() + 1), 1e-12) << line;  // t at the step's end, dt = 1 ms
     EXPECT_GE(f[4], 0.0) << line;
@@ -503,6 +503,8 @@ TEST_F(WorldTest, StepTimesHaveARowPerStepThatTheReportSummarises) {
       cut_rows += 1;
       cut_step = long(f[0]);
     }
+    recoveries += long(f[13]);
+    rejections += long(f[14]);
     ms.push_back(f[2]);
   }
   const nlohmann::json report = test::read_json(m_dir / "steps" / "report.json");
@@ -514,6 +516,8 @@ TEST_F(WorldTest, StepTimesHaveARowPerStepThatTheReportSummarises) {
   EXPECT_EQ(t.median, report["timing_ms"]["step"]["median"].get<double>());
   EXPECT_EQ(t.p95, report["timing_ms"]["step"]["p95"].get<double>());
   EXPECT_EQ(t.max, report["timing_ms"]["step"]["max"].get<double>());
+  EXPECT_EQ(recoveries, report["stability"]["recoveries"].get<long>());
+  EXPECT_EQ(rejections, report["stability"]["energy_rejections"].get<long>());
 }
 
 // The 20-punch slab: the first punch has no earlier cut to snap to; every re-punch at the same spot (the slab sags a

@@ -27,11 +27,12 @@ struct RunOptions {
   std::function<std::unique_ptr<Renderer>()> renderer_factory;
 };
 
-/// The header of steps.csv (`output.step_times`): one row per step, the stages' times in ms (sim::StepProfile) and
-/// the contact queries' (ContactTiming::queries).
+/// The header of steps.csv (`output.step_times`): one row per step, the stages' times in ms (sim::StepProfile, of
+/// the step's last attempt) and the contact queries' (ContactTiming::queries), and the attempts the step rolled back
+/// (the report's stability.recoveries and energy_rejections, counted per step).
 inline constexpr const char* kStepTimesHeader =
     "step,t,ms,cuts,pcg_iterations,refactorized,background,rotations_ms,forces_ms,assembly_ms,contact_ms,solve_ms,"
-    "queries_ms\n";
+    "queries_ms,recoveries,energy_rejections\n";
 
 /// What a run ended with.
 struct RunResult {

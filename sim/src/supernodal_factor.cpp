@@ -130,10 +130,7 @@ bool SupernodalFactorizer<T>::factorize(const SupernodalStructure& L, const int*
   // Each supernode's block is zeroed when its turn comes (below): it is then in the cache for its assembly and
   // updates, where zeroing all of x first streamed it through memory once more.
   const auto size = std::size_t(L.px[L.nsuper]);
-  if (x.capacity() < size) {
-    x.clear();
-    x.reserve(size + size / 8);
-  }
+  reserve_with_room(x, size);
   x.resize(size);
   for (int s = 0; s < L.nsuper; ++s) {
     const int nscol = L.super[s + 1] - L.super[s], nsrow = L.pi[s + 1] - L.pi[s];

@@ -44,26 +44,26 @@ template <class Factor>
   return L;
 }
 
-/// v = n copies of `value`, in v's storage when it is large enough, else in storage an eighth larger than asked.
-/// A factor's large buffers are kept from one analysis to the next (a cut adds a few percent of entries): memory
-/// the process has not touched before costs a page fault per 4 KiB, 2.3 ms for a factor's 5 MB on the machine of
-/// docs/RESULTS.md against 0.05 ms to write it again.
+/// Makes room for n elements in v: its storage when it is large enough, else storage an eighth larger than asked
+/// (v's contents are then dropped). A factor's large buffers are kept from one analysis to the next (a cut adds a few
+/// percent of entries): memory the process has not touched before costs a page fault per 4 KiB, 2.3 ms for a
+/// factor's 5 MB on the machine of docs/RESULTS.md against 0.05 ms to write it again.
+template <class T>
+void reserve_with_room(std::vector<T>& v, std::size_t n) {
+  if (v.capacity() >= n) return;
+  v.clear();
+  v.reserve(n + n / 8);
+}
+/// v = n copies of `value`, in storage kept or grown as reserve_with_room keeps or grows it.
 template <class T>
 void assign_with_room(std::vector<T>& v, std::size_t n, const T& value) {
-  if (v.capacity() < n) {
-    v.clear();
-    v.reserve(n + n / 8);
-  }
+  reserve_with_room(v, n);
   v.assign(n, value);
 }
 /// The same with the values of [first, last).
 template <class T>
 void assign_with_room(std::vector<T>& v, const T* first, const T* last) {
-  const auto n = std::size_t(last - first);
-  if (v.capacity() < n) {
-    v.clear();
-    v.reserve(n + n / 8);
-  }
+  reserve_with_room(v, std::size_t(last - first));
   v.assign(first, last);
 }
 

@@ -32,9 +32,10 @@ struct Plane {
 };
 
 // The distinct face planes of `blade` when it is convex and outward oriented (every vertex on or inside every face
-// plane, within tol m); empty otherwise.
-std::vector<Plane> convex_planes(const sim::TriMesh& blade, double tol) {
+// plane, within tol m); empty otherwise. With `plane_of`, the index of each triangle's plane among them (|F|).
+std::vector<Plane> convex_planes(const sim::TriMesh& blade, double tol, std::vector<int>* plane_of = nullptr) {
   std::vector<Plane> planes;
+  if (plane_of != nullptr) plane_of->clear();
   for (const Tri& t : blade.triangles) {
     const Vec3& a = blade.vertices[static_cast<std::size_t>(t[0])];
     const Vec3 n = (blade.vertices[static_cast<std::size_t>(t[1])] - a)
@@ -42,10 +43,11 @@ std::vector<Plane> convex_planes(const sim::TriMesh& blade, double tol) {
     const double len = n.norm();
     if (!(len > 0.0) || !std::isfinite(len)) return {};
     const Plane p{n / len, n.dot(a) / len};
-    const bool known = std::any_of(planes.begin(), planes.end(), [&](const Plane& q) {
+    const auto known = std::find_if(planes.begin(), planes.end(), [&](const Plane& q) {
       return (q.n - p.n).norm() < 1e-12 && std::abs(q.d - p.d) <= tol;
     });
-    if (!known) planes.push_back(p);
+    if (plane_of != nullptr) plane_of->push_back(static_cast<int>(known - planes.begin()));
+    if (known == planes.end()) planes.push_back(p);
   }
   for (const Plane& p : planes) {
     for (const Vec3& v : blade.vertices) {
@@ -145,6 +147,12 @@ std::vector<Vec3> corners_in_box(const sim::TriMesh& blade, const std::vector<Pl
       corners.push_back(q);
     }
   }
+  // Each vertex comes once per triangle at it: once is enough (the callers take the largest distance of any).
+  const auto lexicographic = [](const Vec3& u, const Vec3& v) {
+    return std::lexicographical_compare(u.data(), u.data() + 3, v.data(), v.data() + 3);
+  };
+  std::sort(corners.begin(), corners.end(), lexicographic);
+  corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
   return corners;
 }
 
@@ -172,44 +180,75 @@ double point_triangle_distance(const Vec3& q, const Vec3& a, const Vec3& b, cons
   return (q - (a + ab * (vb * denom) + ac * (vc * denom))).norm();
 }
 
-// A convex blade as the snapping measures it: its distinct face planes and each triangle's plane (n . x <= d inside).
+// A convex blade as the snapping measures it: its distinct face planes and each triangle's plane (n . x <= d inside),
+// the triangles grouped by the distinct plane they lie in, and how far each group's triangle planes stray from it.
 struct ConvexSolid {
   const sim::TriMesh* mesh = nullptr;
   std::vector<Plane> planes;           // distinct, unit normals
   std::vector<Plane> triangle_planes;  // (|F|) unnormalised normals
+  std::vector<int> group_begin;        // (|planes| + 1) the triangles of plane g: group_triangles[begin[g], begin[g+1])
+  std::vector<int> group_triangles;    // (|F|)
+  std::vector<double> tilt, shift;     // (|planes|) max |n_t / |n_t| - n_g| over the group, max |d_t / |n_t| - d_g|, m
+  double scale = 0.0;                  // the largest |v| of a vertex, m (the rounding of the plane tests)
 };
 
 ConvexSolid convex_solid(const sim::TriMesh& blade, double tol) {
   ConvexSolid c;
   c.mesh = &blade;
   if (sim::signed_volume(blade) <= 0.0) return c;
-  c.planes = convex_planes(blade, tol);
+  std::vector<int> plane_of;
+  c.planes = convex_planes(blade, tol, &plane_of);
   if (c.planes.empty()) return c;
   c.triangle_planes.reserve(blade.triangles.size());
-  for (const Tri& t : blade.triangles) {
+  c.group_begin.assign(c.planes.size() + 1, 0);
+  c.tilt.assign(c.planes.size(), 0.0);
+  c.shift.assign(c.planes.size(), 0.0);
+  for (std::size_t f = 0; f < blade.triangles.size(); ++f) {
+    const Tri& t = blade.triangles[f];
     const Vec3& a = blade.vertices[static_cast<std::size_t>(t[0])];
     const Vec3 n = (blade.vertices[static_cast<std::size_t>(t[1])] - a)
                        .cross(blade.vertices[static_cast<std::size_t>(t[2])] - a);
     c.triangle_planes.push_back({n, n.dot(a)});
+    const auto g = static_cast<std::size_t>(plane_of[f]);
+    const double len = n.norm();
+    c.tilt[g] = std::max(c.tilt[g], (n / len - c.planes[g].n).norm());
+    c.shift[g] = std::max(c.shift[g], std::abs(n.dot(a) / len - c.planes[g].d));
+    ++c.group_begin[g + 1];
   }
+  for (std::size_t g = 0; g < c.planes.size(); ++g) c.group_begin[g + 1] += c.group_begin[g];
+  for (const Vec3& v : blade.vertices) c.scale = std::max(c.scale, v.norm());
+  c.group_triangles.resize(blade.triangles.size());
+  std::vector<int> next(c.group_begin.begin(), c.group_begin.end() - 1);
+  for (std::size_t f = 0; f < blade.triangles.size(); ++f)
+    c.group_triangles[static_cast<std::size_t>(next[static_cast<std::size_t>(plane_of[f])]++)] = static_cast<int>(f);
   return c;
 }
 
 // The distance (m) from q to the convex solid `c` (0 inside, where no triangle's plane has q outside): the closest
-// point lies on a triangle whose plane q is outside of, so only those are measured.
+// point lies on a triangle whose plane q is outside of, so only those are measured. A group of triangles whose
+// distinct plane has q inside by more than its triangles' planes can stray from it (tilt |q| + shift, and a margin
+// for the rounding of the dot products) has q inside each of them and is passed over, so that a blade with many
+// triangles per face costs no more per point than one with few; the answer is the same.
 double distance_to_convex(const Vec3& q, const ConvexSolid& c) {
   double best = 0.0;  // inside (or on the boundary up to rounding) unless some triangle's plane has q outside
   bool outside = false;
   const sim::TriMesh& m = *c.mesh;
-  for (std::size_t f = 0; f < m.triangles.size(); ++f) {
-    const Plane& p = c.triangle_planes[f];
-    if (!(p.n.dot(q) > p.d)) continue;  // q is not outside this triangle's plane
-    const Tri& t = m.triangles[f];
-    if (!outside) best = std::numeric_limits<double>::infinity();
-    outside = true;
-    best = std::min(best, point_triangle_distance(q, m.vertices[static_cast<std::size_t>(t[0])],
-                                                  m.vertices[static_cast<std::size_t>(t[1])],
-                                                  m.vertices[static_cast<std::size_t>(t[2])]));
+  const double q_norm = q.norm();
+  for (std::size_t g = 0; g < c.planes.size(); ++g) {
+    const Plane& pg = c.planes[g];
+    const double margin = c.tilt[g] * q_norm + c.shift[g] + 1e-12 * (q_norm + c.scale);
+    if (pg.n.dot(q) - pg.d < -margin) continue;
+    for (int i = c.group_begin[g]; i < c.group_begin[g + 1]; ++i) {
+      const auto f = static_cast<std::size_t>(c.group_triangles[static_cast<std::size_t>(i)]);
+      const Plane& p = c.triangle_planes[f];
+      if (!(p.n.dot(q) > p.d)) continue;  // q is not outside this triangle's plane
+      const Tri& t = m.triangles[f];
+      if (!outside) best = std::numeric_limits<double>::infinity();
+      outside = true;
+      best = std::min(best, point_triangle_distance(q, m.vertices[static_cast<std::size_t>(t[0])],
+                                                    m.vertices[static_cast<std::size_t>(t[1])],
+                                                    m.vertices[static_cast<std::size_t>(t[2])]));
+    }
   }
   return best;
 }

@@ -45,6 +45,34 @@ inline sim::TriMesh prism_mesh(const sim::Vec3& c, double r, double h, int n) {
   return m;
 }
 
+/// The same solid as prism_mesh(c, r, h, n), its sides cut into `rings` bands (rings + 1 rings of n vertices, the
+/// bottom one first, then the two cap centres), each band's quads split along the diagonal from (band, k) to
+/// (band + 1, k + 1): a blade with many triangles per face, as a finely tessellated instrument mesh has.
+inline sim::TriMesh ringed_prism_mesh(const sim::Vec3& c, double r, double h, int n, int rings) {
+  sim::TriMesh m;
+  for (int j = 0; j <= rings; ++j) {
+    const double z = j == rings ? 0.5 * h : -0.5 * h + h * j / rings;
+    for (int k = 0; k < n; ++k) {
+      const double phi = 2.0 * std::numbers::pi * k / n;
+      m.vertices.push_back(c + sim::Vec3(r * std::cos(phi), r * std::sin(phi), z));
+    }
+  }
+  const int bottom = (rings + 1) * n, top = bottom + 1;
+  m.vertices.push_back(c + sim::Vec3(0.0, 0.0, -0.5 * h));
+  m.vertices.push_back(c + sim::Vec3(0.0, 0.0, 0.5 * h));
+  const auto at = [n](int j, int k) { return j * n + k % n; };
+  for (int j = 0; j < rings; ++j)
+    for (int k = 0; k < n; ++k) {
+      m.triangles.push_back({at(j, k), at(j, k + 1), at(j + 1, k + 1)});
+      m.triangles.push_back({at(j, k), at(j + 1, k + 1), at(j + 1, k)});
+    }
+  for (int k = 0; k < n; ++k) {
+    m.triangles.push_back({bottom, at(0, k + 1), at(0, k)});
+    m.triangles.push_back({top, at(rings, k), at(rings, k + 1)});
+  }
+  return m;
+}
+
 /// Area of the regular n-gon of circumradius r, m^2: the prism's volume is this times its height.
 inline double prism_area(double r, int n) { return 0.5 * n * r * r * std::sin(2.0 * std::numbers::pi / n); }
 

@@ -62,6 +62,26 @@ TEST(SnapTarget, ABladeWithinMinFeatureOfAnEarlierOneSnapsToIt) {
   EXPECT_NEAR(distance, 2.3e-3 * std::tan(M_PI / 180.0), 2e-6);
 }
 
+// A blade whose sides are cut into many triangles per face (a finely tessellated instrument: 40 bands, 2,624
+// triangles) is the same solid as the plain punch: it snaps, and is measured, exactly as the plain one does.
+TEST(SnapTarget, ABladeWithManyTrianglesPerFaceSnapsAsTheSameSolidWithFew) {
+  const auto ringed = [](const Vec3& shift) { return test::ringed_prism_mesh(kAxis + shift, kRadius, 0.02, 32, 40); };
+  const std::vector<TriMesh> earlier_plain{punch(Vec3(0.005, 0.0, 0.0)), punch(Vec3::Zero())};
+  const std::vector<TriMesh> earlier_ringed{ringed(Vec3(0.005, 0.0, 0.0)), ringed(Vec3::Zero())};
+  for (const double d : {1e-9, 3e-5, 2.9e-4, 3.1e-4, 1e-3}) {
+    const Vec3 shift = d * Vec3(0.6, 0.8, 0.0);
+    double plain = -1.0, fine = -1.0;
+    const int k = snap_target(punch(shift), earlier_plain, kRegion, kFeature, &plain);
+    EXPECT_EQ(snap_target(ringed(shift), earlier_ringed, kRegion, kFeature, &fine), k) << d;
+    EXPECT_EQ(k, d < kFeature ? 1 : -1) << d;
+    if (k < 0) continue;
+    // The Hausdorff distance of the prism and its copy moved sideways by d, as for the plain punch.
+    EXPECT_NEAR(fine, plain, 1e-12 * kRadius) << d;
+    EXPECT_LE(fine, d * (1.0 + 1e-9)) << d;
+    EXPECT_GE(fine, d * std::cos(M_PI / 32.0) * (1.0 - 1e-9)) << d;
+  }
+}
+
 TEST(SnapTarget, ABladeFartherThanMinFeatureOrOfAnotherMeshDoesNotSnap) {
   const std::vector<TriMesh> earlier{punch(Vec3::Zero())};
   EXPECT_EQ(snap_target(punch(Vec3(3.1e-4, 0.0, 0.0)), earlier, kRegion, kFeature), -1);

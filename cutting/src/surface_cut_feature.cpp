@@ -14,6 +14,8 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <map>
+#include <numeric>
 #include <vector>
 
 #include "octocut/cutting/surface_cut.hpp"
@@ -31,10 +33,76 @@ struct Plane {
   double d;  // offset, m
 };
 
+// Whether some vertex of `mesh` lies more than tol (m) outside one of `planes`: every plane against every vertex, as
+// a search down a tree of vertex boxes that passes over the boxes wholly within tol of the plane (a margin for the
+// rounding of the box's bound), so that a blade with thousands of distinct face planes (a smooth, finely tessellated
+// tip) costs about |planes| log |V| tests instead of |planes| |V|. Every vertex it does test is tested as
+// n . v - d > tol, so the answer is that of testing them all.
+bool some_vertex_outside(const std::vector<Plane>& planes, const sim::TriMesh& mesh, double tol) {
+  struct Node {
+    Vec3 lo, hi;            // the box of its vertices, m
+    int begin, end, right;  // its vertices order[begin, end); a leaf when right < 0, else children this + 1, right
+  };
+  std::vector<int> order(mesh.vertices.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::vector<Node> nodes;
+  double scale = 0.0;  // m
+  for (const Vec3& v : mesh.vertices) scale = std::max(scale, v.cwiseAbs().maxCoeff());
+  const auto build = [&](const auto& self, int begin, int end) -> void {
+    const auto at = [&](int i) -> const Vec3& { return mesh.vertices[static_cast<std::size_t>(order[static_cast<std::size_t>(i)])]; };
+    Vec3 lo = at(begin), hi = lo;
+    for (int i = begin + 1; i < end; ++i) {
+      lo = lo.cwiseMin(at(i));
+      hi = hi.cwiseMax(at(i));
+    }
+    const auto n = nodes.size();
+    nodes.push_back({lo, hi, begin, end, -1});
+    if (end - begin <= 8) return;
+    int axis = 0;
+    (hi - lo).maxCoeff(&axis);
+    const int mid = begin + (end - begin) / 2;
+    std::nth_element(order.begin() + begin, order.begin() + mid, order.begin() + end, [&](int a, int b) {
+      const double xa = mesh.vertices[static_cast<std::size_t>(a)][axis], xb = mesh.vertices[static_cast<std::size_t>(b)][axis];
+      return xa != xb ? xa < xb : a < b;
+    });
+    self(self, begin, mid);
+    nodes[n].right = static_cast<int>(nodes.size());
+    self(self, mid, end);
+  };
+  if (mesh.vertices.empty()) return false;
+  build(build, 0, static_cast<int>(order.size()));
+  std::vector<int> stack;
+  for (const Plane& p : planes) {
+    const double margin = 1e-12 * (3.0 * scale + std::abs(p.d));  // m: the rounding of the box's bound
+    stack.assign(1, 0);
+    while (!stack.empty()) {
+      const Node& node = nodes[static_cast<std::size_t>(stack.back())];
+      const int self_index = stack.back();
+      stack.pop_back();
+      double bound = 0.0;  // max of n . x over the box
+      for (int a = 0; a < 3; ++a) bound += std::max(p.n[a] * node.lo[a], p.n[a] * node.hi[a]);
+      if (bound - p.d <= tol - margin) continue;
+      if (node.right < 0) {
+        for (int i = node.begin; i < node.end; ++i)
+          if (p.n.dot(mesh.vertices[static_cast<std::size_t>(order[static_cast<std::size_t>(i)])]) - p.d > tol)
+            return true;
+        continue;
+      }
+      stack.push_back(node.right);
+      stack.push_back(self_index + 1);
+    }
+  }
+  return false;
+}
+
 // The distinct face planes of `blade` when it is convex and outward oriented (every vertex on or inside every face
-// plane, within tol m); empty otherwise. With `plane_of`, the index of each triangle's plane among them (|F|).
+// plane, within tol m); empty otherwise. With `plane_of`, the index of each triangle's plane among them (|F|). A
+// triangle's plane is the first one found before it whose unit normal is within 1e-12 and whose offset within tol;
+// the candidates come from the planes sorted by the normal's x (within 2e-12 of this one's), so that distinct planes
+// by the thousand are not each compared with all the others.
 std::vector<Plane> convex_planes(const sim::TriMesh& blade, double tol, std::vector<int>* plane_of = nullptr) {
   std::vector<Plane> planes;
+  std::multimap<double, int> by_x;  // n.x -> index in planes
   if (plane_of != nullptr) plane_of->clear();
   for (const Tri& t : blade.triangles) {
     const Vec3& a = blade.vertices[static_cast<std::size_t>(t[0])];
@@ -43,17 +111,18 @@ std::vector<Plane> convex_planes(const sim::TriMesh& blade, double tol, std::vec
     const double len = n.norm();
     if (!(len > 0.0) || !std::isfinite(len)) return {};
     const Plane p{n / len, n.dot(a) / len};
-    const auto known = std::find_if(planes.begin(), planes.end(), [&](const Plane& q) {
-      return (q.n - p.n).norm() < 1e-12 && std::abs(q.d - p.d) <= tol;
-    });
-    if (plane_of != nullptr) plane_of->push_back(static_cast<int>(known - planes.begin()));
-    if (known == planes.end()) planes.push_back(p);
-  }
-  for (const Plane& p : planes) {
-    for (const Vec3& v : blade.vertices) {
-      if (p.n.dot(v) - p.d > tol) return {};
+    int known = static_cast<int>(planes.size());
+    for (auto it = by_x.lower_bound(p.n.x() - 2e-12); it != by_x.end() && it->first <= p.n.x() + 2e-12; ++it) {
+      const Plane& q = planes[static_cast<std::size_t>(it->second)];
+      if (it->second < known && (q.n - p.n).norm() < 1e-12 && std::abs(q.d - p.d) <= tol) known = it->second;
+    }
+    if (plane_of != nullptr) plane_of->push_back(known);
+    if (known == static_cast<int>(planes.size())) {
+      by_x.emplace(p.n.x(), known);
+      planes.push_back(p);
     }
   }
+  if (some_vertex_outside(planes, blade, tol)) return {};
   return planes;
 }
 

@@ -48,8 +48,9 @@ bool some_vertex_outside(const std::vector<Plane>& planes, const sim::TriMesh& m
   std::vector<Node> nodes;
   double scale = 0.0;  // m
   for (const Vec3& v : mesh.vertices) scale = std::max(scale, v.cwiseAbs().maxCoeff());
+  const auto vertex = [&](int v) -> const Vec3& { return mesh.vertices[static_cast<std::size_t>(v)]; };
   const auto build = [&](const auto& self, int begin, int end) -> void {
-    const auto at = [&](int i) -> const Vec3& { return mesh.vertices[static_cast<std::size_t>(order[static_cast<std::size_t>(i)])]; };
+    const auto at = [&](int i) -> const Vec3& { return vertex(order[static_cast<std::size_t>(i)]); };
     Vec3 lo = at(begin), hi = lo;
     for (int i = begin + 1; i < end; ++i) {
       lo = lo.cwiseMin(at(i));
@@ -62,7 +63,7 @@ bool some_vertex_outside(const std::vector<Plane>& planes, const sim::TriMesh& m
     (hi - lo).maxCoeff(&axis);
     const int mid = begin + (end - begin) / 2;
     std::nth_element(order.begin() + begin, order.begin() + mid, order.begin() + end, [&](int a, int b) {
-      const double xa = mesh.vertices[static_cast<std::size_t>(a)][axis], xb = mesh.vertices[static_cast<std::size_t>(b)][axis];
+      const double xa = vertex(a)[axis], xb = vertex(b)[axis];
       return xa != xb ? xa < xb : a < b;
     });
     self(self, begin, mid);
@@ -84,8 +85,7 @@ bool some_vertex_outside(const std::vector<Plane>& planes, const sim::TriMesh& m
       if (bound - p.d <= tol - margin) continue;
       if (node.right < 0) {
         for (int i = node.begin; i < node.end; ++i)
-          if (p.n.dot(mesh.vertices[static_cast<std::size_t>(order[static_cast<std::size_t>(i)])]) - p.d > tol)
-            return true;
+          if (p.n.dot(vertex(order[static_cast<std::size_t>(i)])) - p.d > tol) return true;
         continue;
       }
       stack.push_back(node.right);

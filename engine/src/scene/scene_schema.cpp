@@ -348,7 +348,10 @@ Entry make_scene_schema() {
           "A closed cylinder about the tool's z axis, centred on the tool origin, in metres (not scaled by "
           "`scale`)."))},
       "The volume a cut removes, in tool coordinates: a closed, oriented triangle mesh file free of "
-      "self-intersections (path relative to the scene file, times `scale`), or `{\"cylinder\": …}`."));
+      "self-intersections (path relative to the scene file, times `scale`), or `{\"cylinder\": …}`. A cut's walls "
+      "are pieces of the blade's triangles, so long thin ones make thin wall triangles (the cylinder's sides are two "
+      "triangles per segment), and every triangle costs the exact boolean time (about 3 µs each on the 50k "
+      "meniscus); see docs/RESULTS.md, \"Blades with many triangles per face\"."));
   Entry tool_friction = optional(number("friction", std::nullopt, at_least(0),
                                         "Coulomb friction coefficient between this tool and the tissue (static = "
                                         "sliding), dimensionless."));

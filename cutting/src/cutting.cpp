@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <deque>
 #include <functional>
 #include <future>
 #include <iterator>
@@ -88,48 +89,97 @@ std::vector<int> triangle_components(const sim::TriMesh& mesh, int& count) {
 // two of the largest leaf edges in play, so that a leaf at the blade's fringe whose material reaches the component
 // just outside the box (around the rim of a thin part, say) counts as the component's own. When no leaf of the
 // component lies in the neighbourhood, nothing is flagged and the cut is not restricted.
-std::vector<char> foreign_leaves(const sim::ObjectModel& model, const BladeVolume& blade,
-                                 const std::vector<int>& component) {
-  const auto own = [&](int e) { return std::binary_search(component.begin(), component.end(), e); };
-  // Only leaves of other components can be foreign: the component's own leaves need no exact blade test.
-  std::vector<int> candidates;  // leaves under the blade (rest space) that are not the component's, ascending
-  for (int e = 0; e < model.num_elements(); ++e) {
-    if (own(e)) continue;
-    const sim::Box3 b = model.root().cell_box(model.tree().leaf(e));
-    if (boxes_overlap(b, blade.bounds()) && blade.overlaps_box(b)) candidates.push_back(e);
-  }
-  if (candidates.empty() || component.empty()) return {};
-  double h = 0.0;  // largest edge among the candidates and the component's leaves, m
-  for (const int e : candidates) h = std::max(h, model.edge()[std::size_t(e)]);
-  for (const int e : component) h = std::max(h, model.edge()[std::size_t(e)]);
-  // The neighbourhood: the candidates first, then every other leaf whose box meets the grown box.
-  const sim::Box3 near{blade.bounds().min.array() - 2.0 * h, blade.bounds().max.array() + 2.0 * h};
-  std::vector<int> context = candidates;
-  for (int e = 0; e < model.num_elements(); ++e) {
-    if (boxes_overlap(model.root().cell_box(model.tree().leaf(e)), near) &&
-        !std::binary_search(candidates.begin(), candidates.end(), e)) {
-      context.push_back(e);
+//
+// One ForeignLeaves serves the components of one cut. What depends only on the rest-space blade (the leaves under
+// it) and on the neighbourhood (its leaves' material groups) is kept per distinct blade and edge h: after a re-cut
+// beside an earlier hole the touched elements fall into dozens of components whose blades snap onto one, and each
+// component then needs only its own leaves' groups. The flags are those of computing everything per component (the
+// groups are a partition of the same leaves whatever the order).
+class ForeignLeaves {
+ public:
+  explicit ForeignLeaves(const sim::ObjectModel& model) : m_model(model) {}
+
+  // The flags for the rest-space blade `blade` of the component `component` (its leaves, ascending).
+  std::vector<char> operator()(const sim::TriMesh& blade, const std::vector<int>& component) {
+    const std::size_t u = under_blade(blade);
+    const Under& under = m_under[u];
+    const auto own = [&](int e) { return std::binary_search(component.begin(), component.end(), e); };
+    std::vector<int> candidates;  // leaves under the blade (rest space) that are not the component's, ascending
+    for (const int e : under.leaves)
+      if (!own(e)) candidates.push_back(e);
+    if (candidates.empty() || component.empty()) return {};
+    double h = 0.0;  // largest edge among the candidates and the component's leaves, m
+    for (const int e : candidates) h = std::max(h, m_model.edge()[std::size_t(e)]);
+    for (const int e : component) h = std::max(h, m_model.edge()[std::size_t(e)]);
+    const std::vector<int>& group = groups_near(u, h);
+    std::vector<char> legit(group.size(), 0);  // per group (its smallest leaf)
+    bool any_own = false;
+    for (const int e : component) {
+      const int g = group[std::size_t(e)];
+      if (g < 0) continue;
+      legit[std::size_t(g)] = 1;
+      any_own = true;
     }
+    if (!any_own) return {};
+    std::vector<char> foreign(std::size_t(m_model.num_elements()), 0);
+    bool any = false;
+    for (const int e : candidates) {
+      if (legit[std::size_t(group[std::size_t(e)])]) continue;
+      foreign[std::size_t(e)] = 1;
+      any = true;
+    }
+    if (!any) return {};
+    return foreign;
   }
-  UnionFind uf = sim::element_groups(model, context);
-  std::vector<char> legit(context.size(), 0);  // per root
-  bool any_own = false;
-  for (std::size_t i = 0; i < context.size(); ++i) {
-    if (!own(context[i])) continue;
-    legit[std::size_t(uf.find(int(i)))] = 1;
-    any_own = true;
+
+ private:
+  struct Under {
+    sim::TriMesh blade;       ///< rest space, m
+    sim::Box3 bounds;         ///< BladeVolume's bounds of it, m
+    std::vector<int> leaves;  ///< leaves whose rest boxes meet the blade, ascending
+  };
+  struct Near {
+    std::size_t under = 0;   ///< index into m_under
+    double h = 0.0;          ///< the edge the neighbourhood was grown by, m
+    std::vector<int> group;  ///< per leaf: the smallest leaf of its material group in the neighbourhood, or -1
+  };
+
+  // The index in m_under of `blade`'s entry, made when it is new.
+  std::size_t under_blade(const sim::TriMesh& blade) {
+    for (std::size_t k = 0; k < m_under.size(); ++k)
+      if (m_under[k].blade.vertices == blade.vertices && m_under[k].blade.triangles == blade.triangles) return k;
+    const BladeVolume volume(blade);
+    Under u{blade, volume.bounds(), {}};
+    for (int e = 0; e < m_model.num_elements(); ++e) {
+      const sim::Box3 b = m_model.root().cell_box(m_model.tree().leaf(e));
+      if (boxes_overlap(b, u.bounds) && volume.overlaps_box(b)) u.leaves.push_back(e);
+    }
+    m_under.push_back(std::move(u));
+    return m_under.size() - 1;
   }
-  if (!any_own) return {};
-  std::vector<char> foreign(std::size_t(model.num_elements()), 0);
-  bool any = false;
-  for (std::size_t i = 0; i < candidates.size(); ++i) {
-    if (legit[std::size_t(uf.find(int(i)))]) continue;
-    foreign[std::size_t(candidates[i])] = 1;
-    any = true;
+
+  // The neighbourhood: every leaf whose box meets the blade's box grown by 2 h (the leaves under the blade among
+  // them), grouped by material connectivity.
+  const std::vector<int>& groups_near(std::size_t index, double h) {
+    for (const Near& n : m_near)
+      if (n.under == index && n.h == h) return n.group;
+    const Under& under = m_under[index];
+    const sim::Box3 near{under.bounds.min.array() - 2.0 * h, under.bounds.max.array() + 2.0 * h};
+    std::vector<int> context;  // ascending
+    for (int e = 0; e < m_model.num_elements(); ++e)
+      if (boxes_overlap(m_model.root().cell_box(m_model.tree().leaf(e)), near)) context.push_back(e);
+    UnionFind uf = sim::element_groups(m_model, context);
+    Near n{index, h, std::vector<int>(std::size_t(m_model.num_elements()), -1)};
+    for (std::size_t i = 0; i < context.size(); ++i)
+      n.group[std::size_t(context[i])] = context[std::size_t(uf.find(int(i)))];
+    m_near.push_back(std::move(n));
+    return m_near.back().group;
   }
-  if (!any) return {};
-  return foreign;
-}
+
+  const sim::ObjectModel& m_model;
+  std::deque<Under> m_under;  // a deque: the references handed out stay valid
+  std::deque<Near> m_near;
+};
 
 // Whether the rest point p lies in a leaf that `foreign` (from foreign_leaves) flags.
 bool in_foreign(const sim::ObjectModel& model, const std::vector<char>& foreign, const sim::Vec3& p) {
@@ -227,14 +277,37 @@ sim::TriMesh rest_blade(const sim::ObjectModel& model, const std::vector<sim::Ve
 // Near-coincident walls snap together: a rest-space blade within options.min_feature of a recent cut's blade or of
 // another component's blade of this cut (`earlier`), where S's material can be (`region`: S's bounds grown by
 // min_feature), becomes that blade exactly (snap_target), so that its walls coincide with the walls that blade left
-// or leaves instead of landing micrometres beside them.
-void snap_blade(const std::vector<sim::TriMesh>& earlier, const sim::Box3& region, const CutOptions& options,
-                sim::TriMesh& blade, CutOutcome& out) {
-  if (!(options.min_feature > 0.0) || earlier.empty()) return;
-  const int k = snap_target(blade, earlier, region, options.min_feature);
-  if (k < 0) return;
-  blade = earlier[std::size_t(k)];
-  ++out.snapped;
+// or leaves instead of landing micrometres beside them. Returns the index in `earlier` of the blade it snaps to, or
+// -1. Only the first `count` of `earlier` are candidates.
+int snap_index(const std::vector<sim::TriMesh>& earlier, std::size_t count, const sim::Box3& region,
+               const CutOptions& options, const sim::TriMesh& blade) {
+  if (!(options.min_feature > 0.0) || count == 0) return -1;
+  if (count == earlier.size()) return snap_target(blade, earlier, region, options.min_feature);
+  return snap_target(blade, std::vector<sim::TriMesh>(earlier.begin(), earlier.begin() + std::ptrdiff_t(count)),
+                     region, options.min_feature);
+}
+
+// The blade of component g (rest space, m) after snapping, and what it must not cut. An unrestricted blade (no
+// foreign leaves) snaps to the latest of `earlier` within min_feature; a restricted one only to the first `recent`
+// of them, the recent cuts' blades (the same blade restricted to two components would meet, exactly, the walls it
+// has just made in the other). Whether the blade as mapped is restricted (a pass over the leaves under it) is asked
+// only where it decides: when the latest one within min_feature is one of this cut's, or when it snaps to none.
+// Either way the result is that of asking first.
+std::vector<char> snapped_blade(ForeignLeaves& foreign_leaves, const std::vector<sim::TriMesh>& earlier,
+                                std::size_t recent, const sim::Box3& region, const CutOptions& options,
+                                const std::vector<int>& g, sim::TriMesh& b, CutOutcome& out) {
+  std::optional<std::vector<char>> mapped_foreign;  // of b as mapped, once asked
+  int k = snap_index(earlier, earlier.size(), region, options, b);
+  if (k >= int(recent)) {
+    mapped_foreign = foreign_leaves(b, g);
+    if (!mapped_foreign->empty()) k = snap_index(earlier, recent, region, options, b);
+  }
+  if (k >= 0) {
+    b = earlier[std::size_t(k)];
+    ++out.snapped;
+    return foreign_leaves(b, g);
+  }
+  return mapped_foreign ? std::move(*mapped_foreign) : foreign_leaves(b, g);
 }
 
 // Stage 1: the leaves whose deformed hexahedra meet the blade, grouped into face- and material-connected
@@ -259,17 +332,16 @@ RestBlades back_transform(const CutObject& object, const sim::ObjectModel& model
     region.max += sim::Vec3::Constant(options.min_feature);
   }
   const std::size_t recent = earlier.size();
+  ForeignLeaves foreign_leaves(model);
   for (const std::vector<int>& g : groups) {
     sim::TriMesh b = rest_blade(model, slots, g, request, options, out);
-    std::vector<char> foreign = foreign_leaves(model, BladeVolume(b), g);
-    if (!object.surface.triangles.empty()) {
-      // A restricted blade snaps only to the recent cuts' blades: the same blade restricted to two components
-      // would meet, exactly, the walls it has just made in the other.
+    std::vector<char> foreign;
+    if (object.surface.triangles.empty()) {
+      foreign = foreign_leaves(b, g);
+    } else {
       const int before = out.snapped;
-      snap_blade(foreign.empty() ? earlier : std::vector<sim::TriMesh>(earlier.begin(), earlier.begin() + recent),
-                 region, options, b, out);
-      if (out.snapped != before) foreign = foreign_leaves(model, BladeVolume(b), g);
-      else if (foreign.empty()) earlier.push_back(b);  // a blade that snapped is among them already
+      foreign = snapped_blade(foreign_leaves, earlier, recent, region, options, g, b, out);
+      if (out.snapped == before && foreign.empty()) earlier.push_back(b);  // one that snapped is among them already
     }
     if (!foreign.empty()) ++out.restricted_components;
     rest.foreign.push_back(std::move(foreign));
@@ -411,6 +483,24 @@ void node_split_stage(sim::ObjectModel next, const DeadTets& dead, const CutOpti
   if (!w.all_gone) w.next = std::make_shared<const sim::ObjectModel>(std::move(next));
 }
 
+// The blades that stages 3 and 4 need (indices, ascending): a blade that repeats another one exactly removes and
+// refines nothing more when that other is unrestricted (no foreign leaves: it removes and refines everything under
+// it) or restricted alike and earlier in the list. A re-cut beside an earlier hole can fall into dozens of components
+// whose blades all snap onto one; the stages then test each tet and leaf against it once.
+std::vector<std::size_t> distinct_blades(const std::vector<sim::TriMesh>& blades,
+                                         const std::vector<std::vector<char>>& foreign) {
+  std::vector<std::size_t> keep;
+  for (std::size_t k = 0; k < blades.size(); ++k) {
+    bool covered = false;
+    for (std::size_t j = 0; j < blades.size() && !covered; ++j) {
+      if (j == k || blades[j].vertices != blades[k].vertices || blades[j].triangles != blades[k].triangles) continue;
+      covered = foreign[j].empty() ? (j < k || !foreign[k].empty()) : (j < k && foreign[j] == foreign[k]);
+    }
+    if (!covered) keep.push_back(k);
+  }
+  return keep;
+}
+
 // Stages 3 (material graph) and 4 (refine, node split, fragments), then the new revision's FEM system, carried-over
 // state and symbolic analysis (the solver part of stage 5), for the rest-space blades. Reads the simulator and M
 // (through its model), changes nothing. Calls model_ready() once everything but the preparation is in `w` (from
@@ -423,14 +513,20 @@ void run_model_stages(ModelWork& w, const std::vector<sim::TriMesh>& blades,
                       const std::function<bool()>& cancelled, const std::function<bool()>& spare_time) {
   const sim::ObjectModel& model = simulator.model();
   auto t0 = Clock::now();
-  std::vector<BladeVolume> rest_volumes(blades.begin(), blades.end());
-  const DeadTets dead = material_graph_stage(model, *model.material_graph(), rest_volumes, foreign);
+  std::vector<BladeVolume> rest_volumes;
+  std::vector<std::vector<char>> distinct_foreign;
+  for (const std::size_t k : distinct_blades(blades, foreign)) {
+    rest_volumes.emplace_back(blades[k]);
+    distinct_foreign.push_back(foreign[k]);
+  }
+  const DeadTets dead = material_graph_stage(model, *model.material_graph(), rest_volumes, distinct_foreign);
   w.tets_removed = int(dead.tets.size());
   w.dead_empty = dead.tets.empty();
   w.ms_material_graph = ms_since(t0);
 
   t0 = Clock::now();
-  sim::ObjectModel next = refine_stage(model, rest_volumes, foreign, dead, inscribed_radius, w.leaves_refined);
+  sim::ObjectModel next =
+      refine_stage(model, rest_volumes, distinct_foreign, dead, inscribed_radius, w.leaves_refined);
   w.ms_refine = ms_since(t0);
 
   t0 = Clock::now();

@@ -331,6 +331,68 @@ bool within(const std::vector<Vec3>& corners, const ConvexSolid& c, double limit
   return true;
 }
 
+// A bound on the Hausdorff distance, inside `region`, of the solids bounded by two meshes with the same triangles
+// (the same blade mesh, mapped differently), for blades that are not convex. The straight-line homotopy from a's
+// vertices to b's moves the point of a's triangle at barycentric coordinates l along d(l), the same combination of
+// its vertices' moves b_v - a_v; a point p of one solid that the other lacks (their winding numbers about p differ)
+// lies on such a path, within |d(l)| of its end. A path that meets the region starts within max_v |b_v - a_v| (the
+// triangle's largest move) of it, so the bound is the largest |d| over the parts of a's triangles inside the region
+// grown by their largest move (|d| is convex along a triangle: its largest value on the clipped polygon is at a
+// corner). Negative when no such part exists (the blade does not reach into the region).
+double correspondence_bound(const sim::TriMesh& a, const sim::TriMesh& b, const sim::Box3& region) {
+  struct Corner {
+    Vec3 p, d;  // m: a point of a's triangle and its move
+  };
+  double bound = -1.0;  // m
+  std::vector<Corner> poly, next;
+  for (const auto& t : a.triangles) {
+    poly.clear();
+    double reach = 0.0;  // m: the triangle's largest move
+    for (int32_t v : t) {
+      const Vec3& p = a.vertices[std::size_t(v)];
+      poly.push_back({p, b.vertices[std::size_t(v)] - p});
+      reach = std::max(reach, poly.back().d.norm());
+    }
+    // Clipped against the grown region's six half-spaces (Sutherland-Hodgman), the moves interpolated alike.
+    for (int axis = 0; axis < 3 && !poly.empty(); ++axis) {
+      for (const double side : {-1.0, 1.0}) {
+        const double limit = side < 0 ? -(region.min[axis] - reach) : region.max[axis] + reach;  // side * x <= limit
+        next.clear();
+        for (std::size_t i = 0; i < poly.size(); ++i) {
+          const Corner& u = poly[i];
+          const Corner& w = poly[(i + 1) % poly.size()];
+          const double fu = side * u.p[axis] - limit, fw = side * w.p[axis] - limit;
+          if (fu <= 0.0) next.push_back(u);
+          if ((fu < 0.0 && fw > 0.0) || (fu > 0.0 && fw < 0.0)) {
+            const double s = fu / (fu - fw);
+            next.push_back({u.p + s * (w.p - u.p), u.d + s * (w.d - u.d)});
+          }
+        }
+        poly.swap(next);
+        if (poly.empty()) break;
+      }
+    }
+    // The clipped corners' moves, and the rounding of the interpolation (far below any min_feature).
+    for (const Corner& c : poly) bound = std::max(bound, c.d.norm() * (1.0 + 1e-12) + 1e-15 * reach);
+  }
+  return bound;
+}
+
+// snap_target for a blade that is not convex: the latest earlier blade with the same mesh whose correspondence
+// bound lies within min_feature.
+int snap_target_by_correspondence(const sim::TriMesh& blade, const std::vector<sim::TriMesh>& earlier,
+                                  const sim::Box3& region, double min_feature, double* distance) {
+  for (std::size_t k = earlier.size(); k-- > 0;) {
+    const sim::TriMesh& e = earlier[k];
+    if (e.vertices.size() != blade.vertices.size() || e.triangles != blade.triangles) continue;
+    const double d = correspondence_bound(blade, e, region);  // m
+    if (d < 0.0 || !(d <= min_feature)) continue;
+    if (distance != nullptr) *distance = d;
+    return static_cast<int>(k);
+  }
+  return -1;
+}
+
 }  // namespace
 
 int snap_target(const sim::TriMesh& blade, const std::vector<sim::TriMesh>& earlier, const sim::Box3& region,
@@ -340,7 +402,7 @@ int snap_target(const sim::TriMesh& blade, const std::vector<sim::TriMesh>& earl
   const sim::Box3 bb = sim::bounds(blade);
   const double tol = 1e-9 * (bb.max - bb.min).norm();  // m: flatness of the blade's faces, convexity
   const ConvexSolid solid = convex_solid(blade, tol);
-  if (solid.planes.empty()) return -1;
+  if (solid.planes.empty()) return snap_target_by_correspondence(blade, earlier, region, min_feature, distance);
   const std::vector<Vec3> corners = corners_in_box(blade, solid.planes, region);
   if (corners.empty()) return -1;  // the blade does not reach into the region
   // The latest candidate within min_feature wins. The distance is the Hausdorff distance of the two solids within

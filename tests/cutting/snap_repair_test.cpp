@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "octocut/cutting/blade.hpp"
 #include "octocut/cutting/mesh_check.hpp"
 #include "octocut/cutting/surface_cut.hpp"
 #include "octocut/sim/primitives.hpp"
@@ -94,6 +95,89 @@ TEST(SnapTarget, ABladeFartherThanMinFeatureOrOfAnotherMeshDoesNotSnap) {
   EXPECT_EQ(snap_target(test::prism_mesh(kAxis, kRadius, 0.02, 24), earlier, kRegion, kFeature), -1);
   EXPECT_EQ(snap_target(punch(Vec3(0.0, 0.0, 0.05)), {punch(Vec3(0.0, 0.0, 0.0501))}, kRegion, kFeature), -1);
   EXPECT_EQ(snap_target(punch(Vec3::Zero()), earlier, kRegion, 0.0), -1);
+}
+
+// A non-convex blade: an L-shaped prism (arms 4 mm long and 1 mm thick, 2 cm tall) with its corner at kAxis, moved
+// by `shift` and then turned by `angle` (rad) about the x axis through kAxis + shift.
+TriMesh l_prism(const Vec3& shift, double angle = 0.0) {
+  constexpr double a = 4e-3, t = 1e-3, h = 0.02;  // m
+  const std::array<std::array<double, 2>, 6> outline{{{0, 0}, {a, 0}, {a, t}, {t, t}, {t, a}, {0, a}}};
+  TriMesh m;
+  for (const double z : {-0.5 * h, 0.5 * h})
+    for (const auto& q : outline) m.vertices.emplace_back(q[0], q[1], z);
+  const int n = 6;
+  for (const auto& f : std::array<std::array<int, 3>, 4>{{{0, 1, 2}, {0, 2, 3}, {0, 3, 4}, {0, 4, 5}}}) {
+    m.triangles.push_back({f[0], f[2], f[1]});          // bottom, facing -z
+    m.triangles.push_back({f[0] + n, f[1] + n, f[2] + n});  // top
+  }
+  for (int i = 0; i < n; ++i) {
+    const int j = (i + 1) % n;
+    m.triangles.push_back({i, j, j + n});
+    m.triangles.push_back({i, j + n, i + n});
+  }
+  const double c = std::cos(angle), s = std::sin(angle);
+  for (Vec3& p : m.vertices) p = kAxis + shift + Vec3(p.x(), c * p.y() - s * p.z(), s * p.y() + c * p.z());
+  return m;
+}
+
+// A blade that is not convex snaps by its vertices' correspondence (the same mesh mapped differently): the Hausdorff
+// distance of the two solids inside the region is at most the largest move of a point of the blade whose path meets
+// the region. A translate by d is at distance d (every point moves by d); a turn about an axis through the slab
+// moves the far ends of the 2 cm blade by more than min_feature but the walls inside the slab by less.
+TEST(SnapTarget, ANonConvexBladeSnapsWhereItsWallsMoveLessThanMinFeatureInsideTheRegion) {
+  ASSERT_GT(sim::signed_volume(l_prism(Vec3::Zero())), 0.0);
+  const std::vector<TriMesh> earlier{l_prism(Vec3(0.005, 0.0, 0.0)), l_prism(Vec3::Zero())};
+  for (const double d : {1e-9, 3e-5, 2.9e-4, 3.1e-4}) {
+    double distance = -1.0;
+    EXPECT_EQ(snap_target(l_prism(d * Vec3(0.6, 0.0, 0.8)), earlier, kRegion, kFeature, &distance),
+              d < kFeature ? 1 : -1) << d;
+    if (d >= kFeature) continue;
+    // d, up to the rounding of the vertices' differences (coordinates of 1e-2 m) and the bound's own margin.
+    EXPECT_GE(distance, d * (1.0 - 1e-9)) << d;
+    EXPECT_LE(distance, d * (1.0 + 1e-9) + 1e-15) << d;
+  }
+  // Turned by 3 degrees about x: the blade's ends (1 cm from the axis) move by 2 (1 cm) sin(1.5 deg) = 0.52 mm.
+  const double angle = 3.0 * M_PI / 180.0;
+  double distance = -1.0;
+  EXPECT_EQ(snap_target(l_prism(Vec3::Zero(), angle), earlier, kRegion, kFeature, &distance), 1);
+  EXPECT_LE(distance, kFeature);
+  // At least the move of the arm's tip where the blade leaves the grown slab (2.3 mm above kAxis, 4 mm along y).
+  EXPECT_GE(distance, 2.0 * std::hypot(4e-3, 2.3e-3) * std::sin(0.5 * angle));
+  // Turned by 6 degrees: the walls inside the slab move by more than min_feature.
+  EXPECT_EQ(snap_target(l_prism(Vec3::Zero(), 2.0 * angle), earlier, kRegion, kFeature), -1);
+  // Another mesh never snaps.
+  EXPECT_EQ(snap_target(l_prism(Vec3::Zero()), {punch(Vec3::Zero())}, kRegion, kFeature), -1);
+}
+
+// The bound is a bound: two L prisms whose vertices moved independently (not an affine map) by up to 0.25 mm, and
+// points on a grid around them in the region: every point inside one solid and outside the other lies within the
+// reported distance of the other's surface.
+TEST(SnapTarget, TheNonConvexBoundHoldsForIndependentVertexMoves) {
+  const TriMesh a = l_prism(Vec3::Zero());
+  for (int seed = 1; seed <= 3; ++seed) {
+    TriMesh b = a;
+    for (std::size_t v = 0; v < b.vertices.size(); ++v) {
+      const double u = double(seed * 7919 + int(v) * 104729 % 1000) / 1000.0;  // deterministic, in [0, 1)
+      b.vertices[v] += 2.5e-4 * Vec3(std::sin(13.0 * u + seed), std::cos(7.0 * u), std::sin(5.0 * u - seed)) / 1.8;
+    }
+    double bound = -1.0;
+    if (snap_target(b, {a}, kRegion, 1e-3, &bound) != 0) ADD_FAILURE() << "no snap at seed " << seed;
+    const BladeVolume va(a), vb(b);
+    // The grid: around the L (x, y from -0.6 to 4.6 mm of its corner) through the region's depth.
+    const Vec3 lo(kAxis.x() - 6e-4, kAxis.y() - 6e-4, kRegion.min.z());
+    const Vec3 hi(kAxis.x() + 4.6e-3, kAxis.y() + 4.6e-3, kRegion.max.z());
+    int differing = 0;
+    for (int i = 0; i <= 60; ++i)
+      for (int j = 0; j <= 60; ++j)
+        for (int k = 0; k <= 20; ++k) {
+          const Vec3 p = lo + Vec3(i / 60.0, j / 60.0, k / 20.0).cwiseProduct(hi - lo);
+          const bool in_a = va.contains(p), in_b = vb.contains(p);
+          if (in_a == in_b) continue;
+          ++differing;
+          EXPECT_LE((in_a ? vb : va).distance(p), bound * (1.0 + 1e-9)) << seed << " at " << p.transpose();
+        }
+    EXPECT_GT(differing, 0) << seed;  // the grid sees the two solids differ
+  }
 }
 
 // Blind holes in the slab, each bite 0.4 mm deeper and its walls a hair off the last one's (turned by ~1e-12 rad and

@@ -391,8 +391,9 @@ Entry make_scene_schema() {
               "earlier cut left) keeps that shell whole and is a no-op, instead of shaving slivers off the surface. "
               "The removed volume is then exact to within `min_feature` times the area of the blade's surface inside "
               "the material. Only convex blades at least 2 `min_feature` thick are tested. A rest-space blade within "
-              "`min_feature` of a recent cut's blade (the same blade mesh; Hausdorff distance of the two convex solids "
-              "inside S's bounds) or of another unrestricted component's blade of the same cut snaps onto it exactly, "
+              "`min_feature` of a recent cut's blade (the same blade mesh; Hausdorff distance of the two solids inside "
+              "S's bounds, exact for convex blades and bounded by the largest move of a corresponding point for "
+              "others) or of another unrestricted component's blade of the same cut snaps onto it exactly, "
               "so that near-coincident walls coincide instead of making slivers; the removed volume is that of the "
               "snapped blade. Edges of a cut's result at new vertices shorter than 0.01 `min_feature` collapse where "
               "exact checks allow (the surface moves by less than that there). 0: off.")},

@@ -136,11 +136,12 @@ bool removes_only_subfeature(const sim::TriMesh& surface, FaceGrid& grid, const 
 /// The earlier blade that `blade` snaps to (cutting.min_feature: near-coincident walls snap together), or -1: the
 /// latest of `earlier` (rest-space blades of earlier cuts, m) that has the same triangles as `blade` (the same blade
 /// mesh, mapped differently) and lies within `min_feature` (m) of it inside `region` (m; where material can be): the
-/// Hausdorff distance of the two solids clipped to the region is below min_feature. Both must be convex (a
-/// non-convex blade never snaps); the distance to a convex solid is convex, so the largest one over the other
-/// clipped solid is taken at its corners. Replacing the blade by that one moves every wall the cut makes by less than
-/// min_feature, exactly onto the wall the earlier blade left: the boolean then meets coincident faces, not slivers
-/// beside them. `distance` (m), when given, receives the winner's distance (infinity when none).
+/// Hausdorff distance of the two solids clipped to the region is below min_feature. For convex blades it is
+/// computed exactly (the distance to a convex solid is convex, so the largest one over the other clipped solid is
+/// taken at its corners); for others it is bounded through the vertices' correspondence (the largest move, from one
+/// blade to the other, of a point of a triangle whose path meets the region). Replacing the blade by that one moves
+/// every wall the cut makes by less than min_feature, exactly onto the wall the earlier blade left: the boolean then
+/// meets coincident faces, not slivers beside them. `distance` (m), when given, receives the winner's distance (infinity when none).
 int snap_target(const sim::TriMesh& blade, const std::vector<sim::TriMesh>& earlier, const sim::Box3& region,
                 double min_feature, double* distance = nullptr);
 

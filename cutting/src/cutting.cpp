@@ -997,18 +997,44 @@ bool only_subfeature(CutObject& object, const RestBlades& rest, const CutOptions
 }
 
 // Keeps the rest-space blades of a cut that changed S for the next cuts to snap to (at most kRecentBlades, the
-// oldest dropped first); one that snapped is there already.
+// oldest dropped first), each with whether it removed all the material under it (no foreign leaves, or its
+// restriction dropped); one that snapped is there already, and becomes whole when it is now.
 void remember_blades(CutObject& object, const RestBlades& rest) {
   if (!(object.surface.triangles.size() > 0)) return;
-  for (const sim::TriMesh& b : rest.blades) {
-    std::vector<sim::TriMesh>& recent = object.recent_blades;
-    const bool known = std::any_of(recent.begin(), recent.end(), [&](const sim::TriMesh& e) {
+  std::vector<sim::TriMesh>& recent = object.recent_blades;
+  std::vector<char>& whole = object.recent_whole;
+  whole.resize(recent.size(), 0);
+  for (std::size_t k = 0; k < rest.blades.size(); ++k) {
+    const sim::TriMesh& b = rest.blades[k];
+    const char now_whole = rest.foreign[k].empty() ? 1 : 0;
+    const auto known = std::find_if(recent.begin(), recent.end(), [&](const sim::TriMesh& e) {
       return e.vertices == b.vertices && e.triangles == b.triangles;
     });
-    if (known) continue;
-    if (recent.size() >= kRecentBlades) recent.erase(recent.begin());
+    if (known != recent.end()) {
+      whole[std::size_t(known - recent.begin())] |= now_whole;
+      continue;
+    }
+    if (recent.size() >= kRecentBlades) {
+      recent.erase(recent.begin());
+      whole.erase(whole.begin());
+    }
     recent.push_back(b);
+    whole.push_back(now_whole);
   }
+}
+
+// Whether every rest-space blade of the cut is one that an earlier cut applied to all the material under it
+// (CutObject::recent_whole): S then holds no material inside any of them (material never returns in rest space),
+// and the boolean would only meet the walls they left, coincident face on face, at the cost of exact arithmetic.
+bool repeats_whole_cuts(const CutObject& object, const RestBlades& rest) {
+  if (rest.blades.empty() || object.recent_whole.size() != object.recent_blades.size()) return false;
+  return std::all_of(rest.blades.begin(), rest.blades.end(), [&](const sim::TriMesh& b) {
+    for (std::size_t j = 0; j < object.recent_blades.size(); ++j) {
+      const sim::TriMesh& e = object.recent_blades[j];
+      if (object.recent_whole[j] && e.vertices == b.vertices && e.triangles == b.triangles) return true;
+    }
+    return false;
+  });
 }
 
 // How a cut ended when it did not throw.
@@ -1026,6 +1052,10 @@ Verdict run_cut(CutObject& object, sim::Simulator& simulator, sim::SurfaceEmbedd
   RestBlades rest = back_transform(object, model, simulator.state(), request, options, out);
   out.ms.back_transform = ms_since(t0);
   if (rest.blades.empty()) return {"no-op", "the blade meets no element"};
+  if (repeats_whole_cuts(object, rest)) {
+    out.ms.surface = ms_since(t0) - out.ms.back_transform;
+    return {"no-op", "the blade is an earlier cut's, which removed all the material under it"};
+  }
   if (only_subfeature(object, rest, options)) {
     out.ms.surface = ms_since(t0) - out.ms.back_transform;
     return {"no-op", "the blade would remove only a shell of material thinner than cutting.min_feature (kept whole)"};

@@ -78,6 +78,9 @@ struct CutObject {
   std::vector<sim::TriMesh> recent_blades;  ///< rest-space blades (m) of the latest cuts that changed S, oldest first
                                             ///< (at most kRecentBlades): a new rest-space blade within min_feature
                                             ///< of one of them snaps onto it (snap_target)
+  std::vector<char> recent_whole;  ///< per recent blade: 1 when a cut removed all the material under it (not
+                                   ///< restricted to a component), so that S holds none inside it: a cut whose
+                                   ///< every rest-space blade is such a blade is a no-op without a boolean
 };
 
 /// How many rest-space blades of earlier cuts CutObject::recent_blades keeps.

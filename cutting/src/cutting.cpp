@@ -269,6 +269,11 @@ std::vector<int> touched_ring(const sim::ObjectModel& model, const std::vector<i
 constexpr int kRingDepth = 2;  // leaves of the ring around the touched ones, counted outwards
 
 std::vector<std::vector<int>> touched_components(const sim::ObjectModel& model, const std::vector<int>& touched) {
+  // Connected among themselves already (most cuts): the ring cannot change that.
+  UnionFind alone = material_groups(model, touched);
+  bool one = true;
+  for (std::size_t i = 0; i < touched.size() && one; ++i) one = alone.find(int(i)) == 0;
+  if (one) return touched.empty() ? std::vector<std::vector<int>>{} : std::vector<std::vector<int>>{touched};
   std::vector<int> context = touched;  // the touched leaves first, then the rings
   std::vector<int> inner = touched;    // ascending
   for (int depth = 0; depth < kRingDepth; ++depth) {

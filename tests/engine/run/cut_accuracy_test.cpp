@@ -13,7 +13,7 @@
 #include <vector>
 
 #include "octocut/cutting/blade.hpp"
-#include "octocut/engine/run/report.hpp"
+#include "octocut/engine/run/report.hpp"  // CutSummary
 #include "octocut/engine/run/world.hpp"
 #include "octocut/engine/scene/scene_loader.hpp"
 #include "octocut/sim/primitives.hpp"
@@ -104,8 +104,7 @@ TEST(CutAccuracy, EachBiteRemovesTheMaterialInsideTheDeformedBlade) {
     const sim::Pose pose = world.tool_pose(0);
     for (Vec3& v : blade.vertices) v = pose.apply(v);
     const Sampled truth = material_in_blade(world, blade, 1000000);
-    world.cut_now(0);
-    const CutSummary& cut = world.report().cuts.back();
+    const CutSummary cut = world.cut_now(0);
     ASSERT_EQ(cut.status, "ok") << c.t;
     EXPECT_NEAR(cut.removed_volume_m3, truth.volume, 0.03 * truth.volume + 3.0 * truth.sigma) << "bite at " << c.t;
     EXPECT_GT(truth.volume, 30.0 * truth.sigma) << c.t;  // the sampling resolves the crescent

@@ -37,16 +37,11 @@ bool boxes_overlap(const sim::Box3& a, const sim::Box3& b) {
 
 sim::Box3 grow(const sim::Box3& a, const sim::Box3& b) { return {a.min.cwiseMin(b.min), a.max.cwiseMax(b.max)}; }
 
-// Groups `leaves` (leaf indices of `model`) by material connectivity among themselves: two leaves are united when
-// they share a face through which material connects. Index i of the result is leaves[i].
-UnionFind material_groups(const sim::ObjectModel& model, const std::vector<int>& leaves) {
-  const sim::RootGeometry& root = model.root();
-  std::vector<sim::Box3> box(leaves.size());  // rest boxes, m
-  for (std::size_t i = 0; i < leaves.size(); ++i) box[i] = root.cell_box(model.tree().leaf(leaves[i]));
-  UnionFind uf(leaves.size());
-  // Candidate pairs by a sweep along x: boxes sorted by their lower x, each compared with those that start before
-  // it ends (the union-find's result does not depend on the order of the unions).
-  std::vector<std::size_t> order(leaves.size());
+// Calls visit(i, j) for every pair of the closed boxes `box` that meet, found by a sweep along x: boxes sorted by
+// their lower x, each compared with those that start before it ends (in the sweep's order, not by index).
+template <class Visit>
+void for_each_meeting_pair(const std::vector<sim::Box3>& box, Visit&& visit) {
+  std::vector<std::size_t> order(box.size());
   std::iota(order.begin(), order.end(), std::size_t{0});
   std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
     return box[a].min.x() != box[b].min.x() ? box[a].min.x() < box[b].min.x() : a < b;
@@ -55,11 +50,32 @@ UnionFind material_groups(const sim::ObjectModel& model, const std::vector<int>&
     const std::size_t i = order[oi];
     for (std::size_t oj = oi + 1; oj < order.size() && box[order[oj]].min.x() <= box[i].max.x(); ++oj) {
       const std::size_t j = order[oj];
-      if (!boxes_overlap(box[i], box[j])) continue;  // no common face
-      const auto face = sim::common_face(model.tree().leaf(leaves[i]), model.tree().leaf(leaves[j]), root);
-      if (face && model.material().face_connected(face->first, face->second)) uf.unite(int(i), int(j));
+      if (boxes_overlap(box[i], box[j])) visit(i, j);
     }
   }
+}
+
+// The rest boxes of `leaves` (leaf indices of `model`), m.
+std::vector<sim::Box3> leaf_boxes(const sim::ObjectModel& model, const std::vector<int>& leaves) {
+  std::vector<sim::Box3> box(leaves.size());
+  for (std::size_t i = 0; i < leaves.size(); ++i) box[i] = model.root().cell_box(model.tree().leaf(leaves[i]));
+  return box;
+}
+
+// Whether two meshes are the same, bit for bit (a blade and the same blade mapped the same way).
+bool same_mesh(const sim::TriMesh& a, const sim::TriMesh& b) {
+  return a.vertices == b.vertices && a.triangles == b.triangles;
+}
+
+// Groups `leaves` (leaf indices of `model`) by material connectivity among themselves: two leaves are united when
+// they share a face through which material connects. Index i of the result is leaves[i]. (The union-find's result
+// does not depend on the order of the unions.)
+UnionFind material_groups(const sim::ObjectModel& model, const std::vector<int>& leaves) {
+  UnionFind uf(leaves.size());
+  for_each_meeting_pair(leaf_boxes(model, leaves), [&](std::size_t i, std::size_t j) {
+    const auto face = sim::common_face(model.tree().leaf(leaves[i]), model.tree().leaf(leaves[j]), model.root());
+    if (face && model.material().face_connected(face->first, face->second)) uf.unite(int(i), int(j));
+  });
   return uf;
 }
 
@@ -147,7 +163,7 @@ class ForeignLeaves {
   // The index in m_under of `blade`'s entry, made when it is new.
   std::size_t under_blade(const sim::TriMesh& blade) {
     for (std::size_t k = 0; k < m_under.size(); ++k)
-      if (m_under[k].blade.vertices == blade.vertices && m_under[k].blade.triangles == blade.triangles) return k;
+      if (same_mesh(m_under[k].blade, blade)) return k;
     const BladeVolume volume(blade);
     Under u{blade, volume.bounds(), {}};
     for (int e = 0; e < m_model.num_elements(); ++e) {
@@ -237,22 +253,10 @@ std::vector<int> touched_ring(const sim::ObjectModel& model, const std::vector<i
       list.push_back(e);
   const std::size_t candidates = list.size();
   list.insert(list.end(), touched.begin(), touched.end());
-  std::vector<sim::Box3> box(list.size());
-  for (std::size_t i = 0; i < list.size(); ++i) box[i] = root.cell_box(model.tree().leaf(list[i]));
-  std::vector<std::size_t> order(list.size());
-  std::iota(order.begin(), order.end(), std::size_t{0});
-  std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
-    return box[a].min.x() != box[b].min.x() ? box[a].min.x() < box[b].min.x() : a < b;
-  });
   std::vector<char> in_ring(candidates, 0);
-  for (std::size_t oi = 0; oi < order.size(); ++oi) {
-    const std::size_t i = order[oi];
-    for (std::size_t oj = oi + 1; oj < order.size() && box[order[oj]].min.x() <= box[i].max.x(); ++oj) {
-      const std::size_t j = order[oj];
-      if ((i < candidates) == (j < candidates) || !boxes_overlap(box[i], box[j])) continue;
-      in_ring[std::min(i, j)] = 1;
-    }
-  }
+  for_each_meeting_pair(leaf_boxes(model, list), [&](std::size_t i, std::size_t j) {
+    if ((i < candidates) != (j < candidates)) in_ring[std::min(i, j)] = 1;
+  });
   std::vector<int> ring;
   for (std::size_t i = 0; i < candidates; ++i)
     if (in_ring[i]) ring.push_back(list[i]);
@@ -550,7 +554,7 @@ std::vector<std::size_t> distinct_blades(const std::vector<sim::TriMesh>& blades
   for (std::size_t k = 0; k < blades.size(); ++k) {
     bool covered = false;
     for (std::size_t j = 0; j < blades.size() && !covered; ++j) {
-      if (j == k || blades[j].vertices != blades[k].vertices || blades[j].triangles != blades[k].triangles) continue;
+      if (j == k || !same_mesh(blades[j], blades[k])) continue;
       covered = foreign[j].empty() ? (j < k || !foreign[k].empty()) : (j < k && foreign[j] == foreign[k]);
     }
     if (!covered) keep.push_back(k);
@@ -872,11 +876,8 @@ SurfaceEditResult cut_with_blade(SurfaceEditor& editor, const sim::ObjectModel& 
 bool repeats_unrestricted(const RestBlades& rest, const SurfaceCut& cut, std::size_t k) {
   if (!rest.foreign[k].empty()) return false;
   const sim::TriMesh& b = rest.blades[k];
-  for (std::size_t j = 0; j < k; ++j) {
-    const sim::TriMesh& e = rest.blades[j];
-    if ((rest.foreign[j].empty() || cut.unrestricted[j]) && e.vertices == b.vertices && e.triangles == b.triangles)
-      return true;
-  }
+  for (std::size_t j = 0; j < k; ++j)
+    if ((rest.foreign[j].empty() || cut.unrestricted[j]) && same_mesh(rest.blades[j], b)) return true;
   return false;
 }
 
@@ -1012,9 +1013,8 @@ void remember_blades(CutObject& object, const RestBlades& rest) {
   for (std::size_t k = 0; k < rest.blades.size(); ++k) {
     const sim::TriMesh& b = rest.blades[k];
     const char now_whole = rest.foreign[k].empty() ? 1 : 0;
-    const auto known = std::find_if(recent.begin(), recent.end(), [&](const sim::TriMesh& e) {
-      return e.vertices == b.vertices && e.triangles == b.triangles;
-    });
+    const auto known =
+        std::find_if(recent.begin(), recent.end(), [&](const sim::TriMesh& e) { return same_mesh(e, b); });
     if (known != recent.end()) {
       whole[std::size_t(known - recent.begin())] |= now_whole;
       continue;
@@ -1034,10 +1034,8 @@ void remember_blades(CutObject& object, const RestBlades& rest) {
 bool repeats_whole_cuts(const CutObject& object, const RestBlades& rest) {
   if (rest.blades.empty() || object.recent_whole.size() != object.recent_blades.size()) return false;
   return std::all_of(rest.blades.begin(), rest.blades.end(), [&](const sim::TriMesh& b) {
-    for (std::size_t j = 0; j < object.recent_blades.size(); ++j) {
-      const sim::TriMesh& e = object.recent_blades[j];
-      if (object.recent_whole[j] && e.vertices == b.vertices && e.triangles == b.triangles) return true;
-    }
+    for (std::size_t j = 0; j < object.recent_blades.size(); ++j)
+      if (object.recent_whole[j] && same_mesh(object.recent_blades[j], b)) return true;
     return false;
   });
 }

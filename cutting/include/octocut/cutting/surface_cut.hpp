@@ -141,7 +141,8 @@ bool removes_only_subfeature(const sim::TriMesh& surface, FaceGrid& grid, const 
 /// taken at its corners); for others it is bounded through the vertices' correspondence (the largest move, from one
 /// blade to the other, of a point of a triangle whose path meets the region). Replacing the blade by that one moves
 /// every wall the cut makes by less than min_feature, exactly onto the wall the earlier blade left: the boolean then
-/// meets coincident faces, not slivers beside them. `distance` (m), when given, receives the winner's distance (infinity when none).
+/// meets coincident faces, not slivers beside them. `distance` (m), when given, receives the winner's distance
+/// (infinity when none).
 int snap_target(const sim::TriMesh& blade, const std::vector<sim::TriMesh>& earlier, const sim::Box3& region,
                 double min_feature, double* distance = nullptr);
 

@@ -150,6 +150,17 @@ BaselineComparison compare_cut_baseline(const std::string& bench_json, const Cut
   const json bench = parse_bench(bench_json);
   BaselineComparison out;
   out.scale = calibration_of(bench) / baseline.calibration_ms;
+  // The scale corrects for a machine's speed at the kernel's mix of work, not for the balance of that work: on another
+  // kind of CPU the stages that lean on memory bandwidth (the embedding update, the solver's preparation) can scale
+  // otherwise (an AMD EPYC baseline flagged them on an Intel Xeon, 1.1-1.3 times its scale, docs/RESULTS.md).
+  const std::string cpu = bench.contains("machine") && bench["machine"].is_object()
+                              ? bench["machine"].value("cpu", std::string())
+                              : std::string();
+  if (!baseline.cpu.empty() && !cpu.empty() && cpu != baseline.cpu)
+    out.notes.push_back("the baseline was taken on '" + baseline.cpu + "', this machine is '" + cpu +
+                        "': the calibration scale corrects for speed, not for the balance between computation and "
+                        "memory; a stage that leans on memory may exceed its limit on another kind of CPU without a "
+                        "change in the code (take a baseline here: --write-baseline)");
   for (const CutBaseline::Benchmark& bm : baseline.benchmarks) {
     const json* run = nullptr;
     if (bench.contains("benchmarks") && bench["benchmarks"].is_array())

@@ -202,6 +202,20 @@ TEST(CutBaseline, TheComparisonGoesIntoTheResultsDocument) {
   EXPECT_NE(baseline_comparison_table(c).find("REGRESSED"), std::string::npos);
 }
 
+TEST(CutBaseline, AnotherCpuModelIsNotedWithoutChangingTheVerdict) {
+  const CutBaseline b = baseline_from(bench_doc(4.0, 0.5), 0.3, 0.0);
+  json other = bench_doc(4.0, 0.5);
+  other["machine"]["cpu"] = "another";
+  const BaselineComparison c = compare_cut_baseline(other.dump(), b);
+  EXPECT_TRUE(c.ok());
+  ASSERT_EQ(c.notes.size(), 1u);
+  EXPECT_NE(c.notes[0].find("'test'"), std::string::npos);
+  EXPECT_NE(c.notes[0].find("'another'"), std::string::npos);
+  EXPECT_NE(baseline_comparison_table(c).find("note: the baseline was taken on"), std::string::npos);
+  // The same model: no note.
+  EXPECT_TRUE(compare_cut_baseline(bench_doc(4.0, 0.5).dump(), b).notes.empty());
+}
+
 TEST(CalibrationKernel, DoesTheSameWorkEveryRun) {
   const CalibrationSample a = calibration_kernel();
   const CalibrationSample b = calibration_kernel();

@@ -1,7 +1,10 @@
 #pragma once
 // Cut-timing regression (SPEC §10): the cut benchmarks of one `octocut bench` run against a stored baseline. Both
 // carry the time of the same calibration kernel, measured on their own machine in their own run; the baseline's
-// times are scaled by the ratio of the two before they are compared, so that a baseline travels between machines.
+// times are scaled by the ratio of the two before they are compared, so that a baseline travels between machines of
+// one kind (faster or slower, busier or idler). Between kinds of CPU the balance of computation and memory differs,
+// and stages that lean on memory can scale otherwise than the kernel: the comparison says so in a note when the CPU
+// models differ, and such a machine should take its own baseline.
 //
 // Baseline file (schema octocut.cut_baseline/1, JSON):
 //   {schema, machine {cpu, threads, calibration_ms}, tolerance, slack_ms,
@@ -58,7 +61,7 @@ struct BaselineComparison {
   double scale = 1.0;                 ///< calibration_ms of this run / calibration_ms of the baseline
   std::vector<BaselineRow> rows;      ///< every compared stage, in baseline order
   std::vector<std::string> problems;  ///< one line per regressed stage or mismatched run (another count of ok cuts)
-  std::vector<std::string> notes;     ///< baseline benchmarks this run did not include
+  std::vector<std::string> notes;     ///< baseline benchmarks this run did not include; another CPU model
   bool ok() const { return problems.empty(); }
 };
 

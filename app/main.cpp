@@ -158,10 +158,12 @@ struct BaselineOptions {
   std::string write_path;    // --write-baseline
   double tolerance = 0.3;    // relative
   double slack_ms = 0.25;    // ms on the baseline machine
+  int repeat = 1;            // --repeat: runs a new baseline takes its medians over
 };
 
 // Runs the benchmarks; with a baseline, compares the cut timings with it (exit 1 on a regression, the JSON still
-// written); with --write-baseline, stores this run's cut timings as a new baseline.
+// written); with --write-baseline, stores the cut timings as a new baseline: with --repeat N, the benchmarks run N
+// times and the baseline takes each stage's median over the runs (the comparison and the JSON are the last run's).
 int cmd_bench(std::vector<std::string> names, const std::string& json_path, bool quiet, const BaselineOptions& b) {
   std::optional<engine::CutBaseline> baseline;
   if (!b.compare_path.empty()) {
@@ -187,7 +189,10 @@ int cmd_bench(std::vector<std::string> names, const std::string& json_path, bool
     engine::check_baseline_allowances(b.tolerance, b.slack_ms);  // before the benchmarks run, not after
     if (names.empty()) names.push_back("cut");
   }
-  std::string doc = engine::run_benchmarks(names, quiet);
+  if (b.repeat < 1 || b.repeat > 100) throw std::invalid_argument("--repeat must lie in [1, 100]");
+  std::vector<std::string> runs;
+  for (int r = 0; r < (b.write_path.empty() ? 1 : b.repeat); ++r) runs.push_back(engine::run_benchmarks(names, quiet));
+  std::string doc = runs.back();
   int code = 0;
   if (baseline) {
     const engine::BaselineComparison c = engine::compare_cut_baseline(doc, *baseline);
@@ -198,8 +203,30 @@ int cmd_bench(std::vector<std::string> names, const std::string& json_path, bool
   }
   if (!json_path.empty()) engine::write_file_atomic(json_path, doc);
   if (!b.write_path.empty())
-    engine::write_file_atomic(b.write_path, engine::make_cut_baseline(doc, b.tolerance, b.slack_ms));
+    engine::write_file_atomic(b.write_path, engine::make_cut_baseline(runs, b.tolerance, b.slack_ms));
   return code;
+}
+
+// The cut-timing baseline options of `octocut bench`.
+void add_baseline_options(CLI::App& bench, BaselineOptions& o) {
+  bench.add_option("--baseline", o.compare_path,
+                   "Compare the cut timings with this octocut.cut_baseline/1 file, normalised by the calibration "
+                   "kernel; exit 1 on a regression (default names: the baseline's benchmarks)");
+  auto* write_baseline = bench.add_option(
+      "--write-baseline", o.write_path,
+      "Store this run's cut timings and calibration as a baseline (default names: every cut/ benchmark)");
+  bench.add_option("--tolerance", o.tolerance, "With --write-baseline: allowed relative slowdown of a stage")
+      ->capture_default_str()
+      ->needs(write_baseline);
+  bench.add_option("--slack-ms", o.slack_ms,
+                   "With --write-baseline: allowed absolute slowdown of a stage, ms on this machine")
+      ->capture_default_str()
+      ->needs(write_baseline);
+  bench.add_option("--repeat", o.repeat,
+                   "With --write-baseline: run the benchmarks this many times and store each stage's median over "
+                   "the runs (each scaled to their median calibration)")
+      ->capture_default_str()
+      ->needs(write_baseline);
 }
 
 /// The absolute path of this executable (the cases of a study run it).
@@ -299,20 +326,7 @@ int main(int argc, char** argv) {
   bool list = false;
   bench->add_flag("--list", list, "List the benchmark names and exit");
   BaselineOptions baseline_opts;
-  bench->add_option("--baseline", baseline_opts.compare_path,
-                    "Compare the cut timings with this octocut.cut_baseline/1 file, normalised by the calibration "
-                    "kernel; exit 1 on a regression (default names: the baseline's benchmarks)");
-  auto* write_baseline = bench->add_option(
-      "--write-baseline", baseline_opts.write_path,
-      "Store this run's cut timings and calibration as a baseline (default names: every cut/ benchmark)");
-  bench->add_option("--tolerance", baseline_opts.tolerance,
-                    "With --write-baseline: allowed relative slowdown of a stage")
-      ->capture_default_str()
-      ->needs(write_baseline);
-  bench->add_option("--slack-ms", baseline_opts.slack_ms,
-                    "With --write-baseline: allowed absolute slowdown of a stage, ms on this machine")
-      ->capture_default_str()
-      ->needs(write_baseline);
+  add_baseline_options(*bench, baseline_opts);
 
   auto* cut = app.add_subcommand("cut", "One rest-space cut of a surface by a blade (stages 2-3, fresh M)");
   engine::CutCommandOptions cut_opts;

@@ -110,6 +110,32 @@ TEST_F(BenchCli, BadBaselinesExitTwoNamingTheFileAndPointerBeforeAnythingRuns) {
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_NE(r.output.find("--tolerance"), std::string::npos) << r.output;
   EXPECT_FALSE(fs::exists(dir / "b.json"));
+
+  r = run_octocut("bench cut/adaptive_cut --quiet --write-baseline " + p("b.json") + " --repeat 0");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("--repeat"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(dir / "b.json"));
+  EXPECT_EQ(run_octocut("bench cut/adaptive_cut --quiet --repeat 3").exit_code, 2);  // needs --write-baseline
+}
+
+TEST_F(BenchCli, ABaselineFromRepeatedRunsTakesTheirMedians) {
+  // Three runs of the adaptive bar's one cut through the command line (the medians themselves are checked on
+  // numbers chosen by hand in CutBaseline.FromSeveralRuns...): the options reach the baseline, whose file the
+  // comparison then reads.
+  const CommandResult r = run_octocut("bench cut/adaptive_cut --quiet --write-baseline " + p("base.json") +
+                                      " --repeat 3 --json " + p("last.json"));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const json base = read("base.json");
+  const json last = read("last.json");
+  ASSERT_EQ(base["benchmarks"].size(), 1u);
+  EXPECT_EQ(base["benchmarks"][0]["cuts_ok"], last["benchmarks"][0]["params"]["ok"]);
+  EXPECT_GT(base["machine"]["calibration_ms"].get<double>(), 0.0);
+  for (const auto& [stage, ms] : base["benchmarks"][0]["ms"].items()) {
+    EXPECT_TRUE(ms.is_number() && ms.get<double>() >= 0.0) << stage;
+  }
+  // A valid baseline file (exit 2 would be a bad file; 0 or 1 is the verdict, which this machine's noise decides).
+  const CommandResult again = run_octocut("bench --quiet --baseline " + p("base.json"));
+  EXPECT_NE(again.exit_code, 2) << again.output;
 }
 
 }  // namespace

@@ -5,6 +5,8 @@
 #include <nlohmann/json.hpp>
 #include <set>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 #include "octocut/engine/run/world.hpp"
 #include "octocut/engine/scene/scene_loader.hpp"
@@ -117,30 +119,58 @@ void check_baseline_allowances(double tolerance, double slack_ms) {
 }
 
 std::string make_cut_baseline(const std::string& bench_json, double tolerance, double slack_ms) {
+  return make_cut_baseline(std::vector<std::string>{bench_json}, tolerance, slack_ms);
+}
+
+std::string make_cut_baseline(const std::vector<std::string>& bench_jsons, double tolerance, double slack_ms) {
   check_baseline_allowances(tolerance, slack_ms);
-  const json bench = parse_bench(bench_json);
-  const double calibration = calibration_of(bench);
+  if (bench_jsons.empty()) throw std::invalid_argument("a baseline needs the results of at least one run");
+  std::vector<json> runs;
+  std::vector<double> calibrations;  // ms, per run
+  for (const std::string& text : bench_jsons) {
+    runs.push_back(parse_bench(text));
+    calibrations.push_back(calibration_of(runs.back()));
+  }
+  // Each run's stage times are scaled to the runs' median calibration (by exactly 1 for the run that has it), then
+  // each stage takes the median over the runs: a slow moment of the machine in one run moves neither.
+  const double calibration = TimingSummary::of(calibrations).median;
+  const json& first = runs.front();
   json doc;
   doc["schema"] = kSchema;
-  doc["machine"] = {{"cpu", bench["machine"].value("cpu", "unknown")},
-                    {"threads", bench["machine"].value("threads", 0)},
+  doc["machine"] = {{"cpu", first["machine"].value("cpu", "unknown")},
+                    {"threads", first["machine"].value("threads", 0)},
                     {"calibration_ms", calibration}};
   doc["tolerance"] = tolerance;
   doc["slack_ms"] = slack_ms;
   doc["benchmarks"] = json::array();
-  for (const json& b : bench.value("benchmarks", json::array())) {
+  for (const json& b : first.value("benchmarks", json::array())) {
     const std::string name = b.value("name", "");
     if (!name.starts_with("cut/")) continue;
-    const long ok = b.contains("params") ? b["params"].value("ok", 0L) : 0L;
-    if (ok < 1) throw std::invalid_argument(name + ": no ok cut to take a baseline from");
-    json ms = json::object();
-    for (const char* k : kBaselineKeys) {
-      const std::string key = std::string(k) + "_ms";
-      if (!b.contains("metrics") || !b["metrics"].contains(key) || !b["metrics"][key].is_number())
-        throw std::invalid_argument(name + ": the results lack metrics/" + key);
-      ms[k] = b["metrics"][key].get<double>();
+    long ok = -1;
+    std::vector<std::vector<double>> ms(kBaselineKeys.size());  // per stage, per run
+    for (std::size_t r = 0; r < runs.size(); ++r) {
+      const json* run = nullptr;
+      if (runs[r].contains("benchmarks") && runs[r]["benchmarks"].is_array())
+        for (const json& c : runs[r]["benchmarks"])
+          if (c.is_object() && c.value("name", "") == name) run = &c;
+      if (run == nullptr) throw std::invalid_argument(name + ": not in run " + std::to_string(r + 1));
+      const long run_ok = run->contains("params") ? (*run)["params"].value("ok", 0L) : 0L;
+      if (run_ok < 1) throw std::invalid_argument(name + ": no ok cut to take a baseline from");
+      if (ok >= 0 && run_ok != ok)
+        throw std::invalid_argument(name + ": " + std::to_string(run_ok) + " ok cuts in run " + std::to_string(r + 1) +
+                                    ", " + std::to_string(ok) + " in the first (medians over other cuts do not mix)");
+      ok = run_ok;
+      const double factor = calibration / calibrations[r];
+      for (std::size_t k = 0; k < kBaselineKeys.size(); ++k) {
+        const std::string key = std::string(kBaselineKeys[k]) + "_ms";
+        if (!run->contains("metrics") || !(*run)["metrics"].contains(key) || !(*run)["metrics"][key].is_number())
+          throw std::invalid_argument(name + ": the results lack metrics/" + key);
+        ms[k].push_back((*run)["metrics"][key].get<double>() * factor);
+      }
     }
-    doc["benchmarks"].push_back({{"name", name}, {"cuts_ok", ok}, {"ms", ms}});
+    json stages = json::object();
+    for (std::size_t k = 0; k < kBaselineKeys.size(); ++k) stages[kBaselineKeys[k]] = TimingSummary::of(ms[k]).median;
+    doc["benchmarks"].push_back({{"name", name}, {"cuts_ok", ok}, {"ms", stages}});
   }
   if (doc["benchmarks"].empty()) throw std::invalid_argument("no cut benchmark ran: a baseline needs at least one");
   return doc.dump(2) + "\n";

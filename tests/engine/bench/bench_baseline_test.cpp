@@ -202,6 +202,34 @@ TEST(CutBaseline, TheComparisonGoesIntoTheResultsDocument) {
   EXPECT_NE(baseline_comparison_table(c).find("REGRESSED"), std::string::npos);
 }
 
+TEST(CutBaseline, FromSeveralRunsEachStageTakesTheMedianOfTheRunsScaledToTheirMedianCalibration) {
+  // Calibrations 4, 5 and 8 ms (median 5): the runs' stages scaled by 5/4, 1 and 5/8 are 1.25 * 0.4, 0.5 and
+  // 0.625 * 1.6 units, i.e. 0.5, 0.5 and 1.0: the median is the middle run's 0.5, whatever the order of the runs.
+  const std::vector<std::string> runs = {bench_doc(8.0, 1.6).dump(), bench_doc(4.0, 0.4).dump(),
+                                         bench_doc(5.0, 0.5).dump()};
+  const CutBaseline b = parse_cut_baseline(make_cut_baseline(runs, 0.3, 0.25), "base.json");
+  EXPECT_EQ(b.calibration_ms, 5.0);
+  ASSERT_EQ(b.benchmarks.size(), 1u);
+  EXPECT_EQ(b.benchmarks[0].cuts_ok, 6);
+  for (std::size_t k = 0; k < b.benchmarks[0].stages.size(); ++k) {
+    const CutBaseline::Stage& s = b.benchmarks[0].stages[k];
+    const double units = s.name == "total" ? 10.0 : double(k + 1);
+    EXPECT_DOUBLE_EQ(s.ms, 0.5 * units) << s.name;
+  }
+  // One run gives what the one-run form gives, bit for bit.
+  EXPECT_EQ(make_cut_baseline(std::vector<std::string>{runs[0]}, 0.3, 0.25), make_cut_baseline(runs[0], 0.3, 0.25));
+  // Runs whose medians cover other cuts do not mix; a benchmark missing from a later run is named.
+  EXPECT_THROW(make_cut_baseline({bench_doc(4.0, 0.5).dump(), bench_doc(4.0, 0.5, 5).dump()}, 0.3, 0.25),
+               std::invalid_argument);
+  try {
+    make_cut_baseline({bench_doc(4.0, 0.5).dump(), bench_doc(4.0, 0.5, 6, "cut/other").dump()}, 0.3, 0.25);
+    ADD_FAILURE() << "a run without cut/demo was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("cut/demo: not in run 2"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(make_cut_baseline(std::vector<std::string>{}, 0.3, 0.25), std::invalid_argument);
+}
+
 TEST(CutBaseline, AnotherCpuModelIsNotedWithoutChangingTheVerdict) {
   const CutBaseline b = baseline_from(bench_doc(4.0, 0.5), 0.3, 0.0);
   json other = bench_doc(4.0, 0.5);

@@ -78,6 +78,13 @@ void check_baseline_allowances(double tolerance, double slack_ms);
 /// slack_ms is out of range (check_baseline_allowances).
 std::string make_cut_baseline(const std::string& bench_json, double tolerance, double slack_ms);
 
+/// The same from several runs of the same benchmarks (`octocut bench --write-baseline F --repeat N`): each run's
+/// times scaled to the runs' median calibration, then each stage's median over the runs (the middle value; the upper
+/// one of two). The machine and calibration are the runs' (the median calibration). Throws std::invalid_argument as
+/// above, when `bench_jsons` is empty, or when a cut benchmark of the first run is missing from another or has
+/// another count of ok cuts there.
+std::string make_cut_baseline(const std::vector<std::string>& bench_jsons, double tolerance, double slack_ms);
+
 /// Compares the cut benchmarks of an octocut.bench/1 document with `baseline`. A compared stage without a measured
 /// time is a problem. Throws std::invalid_argument when the document is not JSON or lacks its calibration.
 BaselineComparison compare_cut_baseline(const std::string& bench_json, const CutBaseline& baseline);

@@ -371,6 +371,13 @@ std::vector<char> snapped_blade(ForeignLeaves& foreign_leaves, const std::vector
   return mapped_foreign ? std::move(*mapped_foreign) : foreign_leaves(b, g);
 }
 
+// S's rest-space bounds, m: those the grid keeps when it matches S (computed here the first time), else a pass over S.
+sim::Box3 surface_bounds(const CutObject& object) {
+  if (!surface_indexed(object)) return sim::bounds(object.surface);
+  if (!object.grid.bounds) object.grid.bounds = sim::bounds(object.surface);
+  return *object.grid.bounds;
+}
+
 // Stage 1: the leaves whose deformed hexahedra meet the blade, grouped into face- and material-connected
 // components; per component a shape-matching affine map takes the blade into rest space (B'_i), restricted to the
 // component's material (foreign_leaves). No blade when the blade meets no element. Throws StageFailure.
@@ -388,7 +395,7 @@ RestBlades back_transform(const CutObject& object, const sim::ObjectModel& model
   sim::Box3 region{sim::Vec3::Zero(), sim::Vec3::Zero()};      // m
   // S's bounds (a pass over S) only when a blade may snap: after earlier cuts, or with several components.
   if (options.min_feature > 0.0 && !object.surface.triangles.empty() && (!earlier.empty() || groups.size() > 1)) {
-    region = sim::bounds(object.surface);
+    region = surface_bounds(object);
     region.min -= sim::Vec3::Constant(options.min_feature);
     region.max += sim::Vec3::Constant(options.min_feature);
   }
@@ -775,6 +782,7 @@ class SurfaceTransaction {
   void commit() {
     m_editor.commit();
     m_committed = true;
+    follow_bounds();
     m_object.grid.vertices = m_object.surface.vertices.size();
     m_object.grid.triangles = m_object.surface.triangles.size();
   }
@@ -790,6 +798,30 @@ class SurfaceTransaction {
       }
     }
     return object;
+  }
+
+  // The grid's bounds of S after the cut, exactly, without a pass over S: S lost the vertices of m_unused that it had
+  // before (nothing else moved) and gained the cut's kept new vertices, the last ones. While no lost vertex lies on
+  // one of the bounds, each bound is still reached by a kept vertex, so the old bounds grown by the new vertices are
+  // S's; otherwise they are dropped, for the next cut that needs them to compute.
+  void follow_bounds() {
+    std::optional<sim::Box3>& bounds = m_object.grid.bounds;
+    if (!bounds) return;
+    std::size_t lost = 0;
+    for (std::size_t i = 0; i < m_unused.size(); ++i) {
+      if (std::size_t(m_unused[i]) >= m_vertices_before) continue;
+      ++lost;
+      const sim::Vec3& p = m_unused_positions[i];
+      if ((p.array() == bounds->min.array()).any() || (p.array() == bounds->max.array()).any()) {
+        bounds.reset();
+        return;
+      }
+    }
+    const std::vector<sim::Vec3>& vs = m_object.surface.vertices;
+    for (std::size_t v = m_vertices_before - lost; v < vs.size(); ++v) {
+      bounds->min = bounds->min.cwiseMin(vs[v]);
+      bounds->max = bounds->max.cwiseMax(vs[v]);
+    }
   }
 
   // Undoes compact(): the kept vertices move back up (back to front, so that none overwrites one not yet moved),
@@ -1110,6 +1142,7 @@ void index_surface(CutObject& object) {
   object.grid.grid = std::move(grid);
   object.grid.vertices = object.surface.vertices.size();
   object.grid.triangles = object.surface.triangles.size();
+  object.grid.bounds.reset();
 }
 
 bool surface_indexed(const CutObject& object) {

@@ -188,6 +188,37 @@ TEST(CutPipeline, SurfaceGridFollowsSThroughCutsAndCopies) {
   expect_watertight(copied.surface, "copy");
 }
 
+TEST(CutPipeline, SurfaceBoundsFollowSThroughCuts) {
+  // The grid keeps S's bounds from cut to cut once a blade that may snap needed them: a cavity keeps them (it removes
+  // no vertex of S), a cut that takes off the slab's end drops them (its lost vertices lay on the bounds), and
+  // whatever the grid holds equals a pass over S bit for bit. Without that drop the kept bounds would still end at
+  // x = 40 mm.
+  Object o = make_object(kSlab, kSlabRoot, 4, 7, {left_handle()});
+  cutting::index_surface(o.cut);
+  const auto expect_exact = [&](const char* after) {
+    if (!o.cut.grid.bounds) return;
+    const Box3 truth = sim::bounds(o.cut.surface);
+    EXPECT_EQ(o.cut.grid.bounds->min, truth.min) << after;
+    EXPECT_EQ(o.cut.grid.bounds->max, truth.max) << after;
+  };
+  const double r = 0.0015;
+  ASSERT_EQ(cut(o, prism(Vec3(0.02, 0.02, 0.002), r, 0.01, 24), r * 0.98).status, "ok");
+  EXPECT_FALSE(o.cut.grid.bounds.has_value());  // no earlier blade to snap to: not needed yet
+  const sim::TriMesh cavity = prism(Vec3(0.012, 0.03, 0.002), 0.001, 0.002, 16);
+  ASSERT_EQ(cut(o, cavity, 0.0009).status, "ok");
+  ASSERT_TRUE(o.cut.grid.bounds.has_value());  // computed for the cavity's blade, kept through its cut
+  expect_exact("the cavity");
+  const sim::TriMesh end = sim::closed_box_grid(Box3{Vec3(0.035, -0.01, -0.01), Vec3(0.05, 0.05, 0.02)}, 1);
+  ASSERT_EQ(cut(o, end, 0.005).status, "ok");
+  EXPECT_EQ(sim::bounds(o.cut.surface).max.x(), 0.035);
+  expect_exact("the end cut off");
+  ASSERT_EQ(cut(o, prism(Vec3(0.025, 0.01, 0.002), 0.001, 0.002, 16), 0.0009).status, "ok");
+  ASSERT_TRUE(o.cut.grid.bounds.has_value());
+  expect_exact("the second cavity");
+  expect_watertight(o.cut.surface, "surface");
+  expect_embeds_surface(o);
+}
+
 TEST(CutPipeline, BladeFlushWithTheSurfaceAndOnItsVertices) {
   // The slab's surface grid has lines every 2.5 mm in x and y and every 2 mm in z. A box blade from 15 to 25 mm in x
   // and y and from 2 to 4 mm in z has its top face in the slab's top face, its vertices on surface vertices and its

@@ -3,6 +3,7 @@
 // blade, in five timed stages, as one transaction. No CGAL type appears here; the exact surface boolean lives in
 // cutting/src/surface_cut*.cpp (one file per phase).
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -50,6 +51,10 @@ struct CutOptions {
 struct SurfaceGrid {
   std::unique_ptr<FaceGrid> grid;
   std::size_t vertices = 0, triangles = 0;  ///< |V| and |F| of the surface it was built or last updated for
+  /// S's rest-space bounds (m), once a cut has needed them (a blade that may snap); kept exact from cut to cut
+  /// without a pass over S (a cut only adds vertices inside them and removes others), and dropped when a cut
+  /// removes a vertex on one of them. Empty until needed and after index_surface.
+  mutable std::optional<sim::Box3> bounds;
 
   SurfaceGrid() = default;
   SurfaceGrid(const SurfaceGrid&) {}

@@ -1,10 +1,11 @@
 #pragma once
 // Cut-timing regression (SPEC §10): the cut benchmarks of one `octocut bench` run against a stored baseline. Both
 // carry the time of the same calibration kernel, measured on their own machine in their own run; the baseline's
-// times are scaled by the ratio of the two before they are compared, so that a baseline travels between machines of
-// one kind (faster or slower, busier or idler). Between kinds of CPU the balance of computation and memory differs,
-// and stages that lean on memory can scale otherwise than the kernel: the comparison says so in a note when the CPU
-// models differ, and such a machine should take its own baseline.
+// times are scaled by the ratio of the two before they are compared, so that a baseline travels between faster and
+// slower machines of one kind. Between kinds of CPU the balance of computation and memory differs, and stages that
+// lean on memory can scale otherwise than the kernel: the comparison says so in a note when the CPU models differ,
+// and such a machine should take its own baseline. On a shared host those stages also swing with the other tenants'
+// load more than the kernel does (docs/RESULTS.md): compare on an idle machine.
 //
 // Baseline file (schema octocut.cut_baseline/1, JSON):
 //   {schema, machine {cpu, threads, calibration_ms}, tolerance, slack_ms,

@@ -118,9 +118,10 @@ double clip_tet_box_volume(const Tet& tet, const Box3& box) {
   if ((lo.array() >= box.min.array()).all() && (hi.array() <= box.max.array()).all()) return tet_volume(tet);
   if ((hi.array() <= box.min.array()).any() || (lo.array() >= box.max.array()).any()) return 0.0;
 
-  // Clip by each of the six planes that actually cuts the tet.
-  std::vector<Tet> a{tet}, b;
-  b.reserve(16);
+  // Clip by each of the six planes that actually cuts the tet, in two buffers per thread that keep their storage
+  // from call to call (a refinement measures thousands of leaves, most of them cut by a plane or two).
+  thread_local std::vector<Tet> a, b;
+  a.assign(1, tet);
   for (int axis = 0; axis < 3; ++axis) {
     if (lo[axis] < box.min[axis]) {
       clip_tets(a, b, axis, box.min[axis], -1.0);

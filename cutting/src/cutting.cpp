@@ -393,7 +393,7 @@ RestBlades back_transform(const CutObject& object, const sim::ObjectModel& model
   RestBlades rest;
   std::vector<sim::TriMesh> earlier = object.recent_blades;  // what a blade may snap to
   sim::Box3 region{sim::Vec3::Zero(), sim::Vec3::Zero()};      // m
-  // S's bounds (a pass over S) only when a blade may snap: after earlier cuts, or with several components.
+  // S's bounds only when a blade may snap: after earlier cuts, or with several components (the grid keeps them).
   if (options.min_feature > 0.0 && !object.surface.triangles.empty() && (!earlier.empty() || groups.size() > 1)) {
     region = surface_bounds(object);
     region.min -= sim::Vec3::Constant(options.min_feature);
@@ -818,10 +818,7 @@ class SurfaceTransaction {
       }
     }
     const std::vector<sim::Vec3>& vs = m_object.surface.vertices;
-    for (std::size_t v = m_vertices_before - lost; v < vs.size(); ++v) {
-      bounds->min = bounds->min.cwiseMin(vs[v]);
-      bounds->max = bounds->max.cwiseMax(vs[v]);
-    }
+    for (std::size_t v = m_vertices_before - lost; v < vs.size(); ++v) *bounds = grow(*bounds, {vs[v], vs[v]});
   }
 
   // Undoes compact(): the kept vertices move back up (back to front, so that none overwrites one not yet moved),

@@ -68,6 +68,15 @@ double calibration_of(const json& bench) {
   return c;
 }
 
+// The benchmark named `name` in a bench document, or null when it did not run (the last entry of that name).
+const json* find_benchmark(const json& bench, const std::string& name) {
+  const json* run = nullptr;
+  if (bench.contains("benchmarks") && bench["benchmarks"].is_array())
+    for (const json& b : bench["benchmarks"])
+      if (b.is_object() && b.value("name", "") == name) run = &b;
+  return run;
+}
+
 json parse_bench(const std::string& bench_json) {
   try {
     return json::parse(bench_json);
@@ -149,10 +158,7 @@ std::string make_cut_baseline(const std::vector<std::string>& bench_jsons, doubl
     long ok = -1;
     std::vector<std::vector<double>> ms(kBaselineKeys.size());  // per stage, per run
     for (std::size_t r = 0; r < runs.size(); ++r) {
-      const json* run = nullptr;
-      if (runs[r].contains("benchmarks") && runs[r]["benchmarks"].is_array())
-        for (const json& c : runs[r]["benchmarks"])
-          if (c.is_object() && c.value("name", "") == name) run = &c;
+      const json* run = find_benchmark(runs[r], name);
       if (run == nullptr) throw std::invalid_argument(name + ": not in run " + std::to_string(r + 1));
       const long run_ok = run->contains("params") ? (*run)["params"].value("ok", 0L) : 0L;
       if (run_ok < 1) throw std::invalid_argument(name + ": no ok cut to take a baseline from");
@@ -183,19 +189,14 @@ BaselineComparison compare_cut_baseline(const std::string& bench_json, const Cut
   // The scale corrects for a machine's speed at the kernel's mix of work, not for the balance of that work: on another
   // kind of CPU the stages that lean on memory bandwidth (the embedding update, the solver's preparation) can scale
   // otherwise (an AMD EPYC baseline flagged them on an Intel Xeon, 1.1-1.3 times its scale, docs/RESULTS.md).
-  const std::string cpu = bench.contains("machine") && bench["machine"].is_object()
-                              ? bench["machine"].value("cpu", std::string())
-                              : std::string();
+  const std::string cpu = bench["machine"].value("cpu", std::string());  // calibration_of checked "machine"
   if (!baseline.cpu.empty() && !cpu.empty() && cpu != baseline.cpu)
     out.notes.push_back("the baseline was taken on '" + baseline.cpu + "', this machine is '" + cpu +
                         "': the calibration scale corrects for speed, not for the balance between computation and "
                         "memory; a stage that leans on memory may exceed its limit on another kind of CPU without a "
-                        "change in the code (take a baseline here: --write-baseline)");
+                        "change in the code (take a baseline here: --write-baseline F --repeat 5)");
   for (const CutBaseline::Benchmark& bm : baseline.benchmarks) {
-    const json* run = nullptr;
-    if (bench.contains("benchmarks") && bench["benchmarks"].is_array())
-      for (const json& b : bench["benchmarks"])
-        if (b.is_object() && b.value("name", "") == bm.name) run = &b;
+    const json* run = find_benchmark(bench, bm.name);
     if (run == nullptr) {
       out.notes.push_back(bm.name + ": not run, not compared");
       continue;

@@ -130,7 +130,13 @@ TEST_F(CliRunTest, EndlessTimelineIsBadInput) {
   const fs::path scene = write("endless.json", kCube);
   const CommandResult r = run_octocut("validate '" + scene.string() + "' --set /duration=1e308 --set /solver/dt=1e-300");
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_NE(r.output.find("endless.json: /duration: duration / dt asks for"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("endless.json: /duration: duration / dt asks for inf steps"), std::string::npos) << r.output;
+  // A finite count is written as the number it is, not as 300 digits.
+  const CommandResult r2 = run_octocut("validate '" + scene.string() + "' --set /duration=1e300 --set /solver/dt=1e-3");
+  EXPECT_EQ(r2.exit_code, 2);
+  EXPECT_NE(r2.output.find("endless.json: /duration: duration / dt asks for 1e+303 steps; at most 1000000000 are"),
+            std::string::npos)
+      << r2.output;
 }
 
 TEST_F(CliRunTest, UsageErrorsExitTwo) {

@@ -13,6 +13,7 @@
 #include "octocut/sim/pose.hpp"
 #include "octocut/sim/primitives.hpp"
 #include "octocut/sim/timing.hpp"
+#include "scene/scene_schema.hpp"
 
 namespace octocut::engine {
 
@@ -32,7 +33,7 @@ bool scene_cuts(const Scene& scene) {
 long step_count(const Scene& scene) {
   const double steps = std::ceil(scene.duration / scene.solver.dt - 1e-9);
   if (!(steps <= double(kMaxSteps)))
-    throw SceneError(scene.file + ": /duration: duration / dt asks for " + std::to_string(steps) +
+    throw SceneError(scene.file + ": /duration: duration / dt asks for " + schema::format_number(steps) +
                      " steps; at most " + std::to_string(kMaxSteps) + " are allowed");
   return std::max(1L, long(steps));
 }
@@ -79,8 +80,8 @@ SceneObject build_scene_object(const Scene& scene, bool cuttable) {
     const double h = o.material_graph_cell_size;
     const double cells = box.volume() / (h * h * h);
     if (!(cells <= kMaxMaterialCells))
-      throw SceneError(scene.file + ": /object/material_graph/cell_size: " + std::to_string(h) +
-                       " m is too small for this box (volume / cell_size^3 = " + std::to_string(cells) +
+      throw SceneError(scene.file + ": /object/material_graph/cell_size: " + schema::format_number(h) +
+                       " m is too small for this box (volume / cell_size^3 = " + schema::format_number(cells) +
                        ", at most 2e5)");
     out.surface = sim::closed_box_grid(box, 24);
     const auto t0 = sim::Clock::now();
@@ -102,8 +103,8 @@ SceneObject build_scene_object(const Scene& scene, bool cuttable) {
     const double h = o.material_graph_cell_size;
     const double cells = sim::signed_volume(out.surface) / (h * h * h);
     if (!(cells <= kMaxMaterialCells))
-      throw SceneError(scene.file + ": /object/material_graph/cell_size: " + std::to_string(h) +
-                       " m is too small for this object (volume / cell_size^3 = " + std::to_string(cells) +
+      throw SceneError(scene.file + ": /object/material_graph/cell_size: " + schema::format_number(h) +
+                       " m is too small for this object (volume / cell_size^3 = " + schema::format_number(cells) +
                        ", at most 2e5, about a million tets); check also /object/scale");
     try {
       MaterialGraphResult g = material_graph_for(out.surface, h);

@@ -116,6 +116,12 @@ Entry optional(Entry entry) {
   return entry;
 }
 
+/// The entry with its numbers (each element of a number array) in `range`.
+Entry ranged(Entry entry, Range range) {
+  entry.range = range;
+  return entry;
+}
+
 /// An object of numbers in `range` whose keys are among `keys`, with at least `min_items` of them.
 Entry number_map(std::string key, std::vector<std::string> keys, Range range, std::size_t min_items, std::string doc) {
   Entry entry = make_entry(std::move(key), Type::number_map, std::move(doc));
@@ -162,10 +168,10 @@ Entry make_rigid_bodies() {
   shape.children[1].children[0].length = 3;
   shape.children[1].children[0].range = greater_than(0);
   shape.default_value.reset();
-  Entry mass = optional(number("mass", std::nullopt, make_range(std::nullopt, false, std::nullopt, false),
+  Entry mass = optional(number("mass", std::nullopt, make_range(std::nullopt, false, 1e6, false),
                                "Mass, kg; required and > 0 for a dynamic body, ignored otherwise."));
   mass.default_doc = "none";
-  Entry friction = optional(number("friction", std::nullopt, at_least(0),
+  Entry friction = optional(number("friction", std::nullopt, closed(0, 10),
                                    "Coulomb friction coefficient between this body and the tissue, dimensionless."));
   friction.default_doc = "`contact.friction`";
   return object_array(
@@ -202,10 +208,10 @@ Entry make_contact() {
   stiffness.default_doc = "10 E / h_min";
   return object("contact",
                 {std::move(stiffness),
-                 number("friction", 0.3, at_least(0),
+                 number("friction", 0.3, closed(0, 10),
                         "Coulomb friction coefficient of tools and bodies that set none, dimensionless (static = "
                         "sliding; a contact slower than 0.1 mm/s counts as sticking, see docs/architecture.md)."),
-                 number("damping", 1e-3, at_least(0),
+                 number("damping", 1e-3, closed(0, 1),
                         "Contact damping time, s: each collision sample's normal damping coefficient is `damping` "
                         "times its penalty stiffness.")},
                 "Contact of the tissue with tools that collide, colliding props and rigid bodies.");
@@ -232,7 +238,8 @@ Entry make_scene_schema() {
           choice("mode", {"dynamic", "static"}, "dynamic",
                  "`dynamic` integrates the equations of motion in time; `static` solves for equilibrium at each step (load steps of `dt` up to `duration`; once when nothing moves with time and `duration` is not given)."),
           number("dt", 1e-3, open_closed(0, 1), "Time step, s."),
-          vec3("gravity", std::array{0.0, 0.0, -9.81}, "Gravitational acceleration, m/s^2."),
+          ranged(vec3("gravity", std::array{0.0, 0.0, -9.81}, "Gravitational acceleration, m/s^2 (each component)."),
+                 closed(-1e4, 1e4)),
           choice("linear_solver", {"cholmod", "pcg"}, "pcg",
                  "Linear solver: `cholmod` (supernodal Cholesky, factorised every step) or `pcg` (warm-started "
                  "conjugate gradients preconditioned by a lagged Cholesky factor that is refreshed when convergence "
@@ -267,11 +274,12 @@ Entry make_scene_schema() {
   Entry material =
       object("material",
              {
-                 number("young_modulus", 1e5, open_closed(0, 1e12), "Young's modulus E, Pa."),
+                 number("young_modulus", 1e5, closed(1, 1e12),
+                        "Young's modulus E, Pa (from the softest gels, about 10 Pa, to steel and beyond)."),
                  number("poisson_ratio", 0.3, closed_open(0, 0.5), "Poisson's ratio nu (dimensionless)."),
-                 number("density", 1000.0, greater_than(0), "Mass density rho, kg/m^3."),
-                 number("rayleigh_mass", 0.0, at_least(0), "Mass-proportional Rayleigh damping alpha, 1/s."),
-                 number("rayleigh_stiffness", 0.0, at_least(0), "Stiffness-proportional Rayleigh damping beta, s."),
+                 number("density", 1000.0, closed(1, 1e5), "Mass density rho, kg/m^3 (soft tissue about 1000)."),
+                 number("rayleigh_mass", 0.0, closed(0, 1e6), "Mass-proportional Rayleigh damping alpha, 1/s."),
+                 number("rayleigh_stiffness", 0.0, closed(0, 10), "Stiffness-proportional Rayleigh damping beta, s."),
                  choice("element", {"trilinear", "bbar"}, "bbar",
                         "Hexahedron formulation: `bbar` (B-bar, mean dilatation per element: does not lock "
                         "volumetrically as nu approaches 0.5; the default, chosen by the stability and accuracy "
@@ -352,7 +360,7 @@ Entry make_scene_schema() {
       "are pieces of the blade's triangles, so long thin ones make thin wall triangles (the cylinder's sides are two "
       "triangles per segment), and every triangle costs the exact boolean time (about 3 µs each on the 50k "
       "meniscus); see docs/RESULTS.md, \"Blades with many triangles per face\"."));
-  Entry tool_friction = optional(number("friction", std::nullopt, at_least(0),
+  Entry tool_friction = optional(number("friction", std::nullopt, closed(0, 10),
                                         "Coulomb friction coefficient between this tool and the tissue (static = "
                                         "sliding), dimensionless."));
   tool_friction.default_doc = "`contact.friction`";

@@ -77,6 +77,8 @@ Entry number_map(std::string key, std::vector<std::string> keys, Range range, st
 Entry required(Entry entry);
 /// An optional key with no default: when absent it stays absent.
 Entry optional(Entry entry);
+/// The entry with its numbers (each element of a number array) in `range`.
+Entry ranged(Entry entry, Range range);
 
 /// Returns the schema of a whole scene document: an object entry with an empty key.
 const Entry& scene_schema();

@@ -1,10 +1,10 @@
 #include "supernode_kernels.hpp"
 
 // Compiled with -ffp-contract=off (sim/CMakeLists.txt), like the element kernel: no copy fuses a multiply-add. The
-// arithmetic is written on 16-float vectors (GCC's vector extension), which each copy (supernode_kernels_body.inc,
-// compiled once per instruction set) maps onto its own registers (one AVX-512 register, two AVX2 ones, four SSE2
-// ones) lane by lane, and every sum is in an order fixed by this code (the dot products' 16 partial sums and the tree
-// that adds them); half precision's codes are widened to floats exactly. So every copy gives the same bits.
+// arithmetic is written on GCC's vector extension, each copy (supernode_kernels_body.inc, compiled once per
+// instruction set) on its native width (16 floats for AVX-512, 8 for AVX2, 4 for SSE2), lane by lane, and every sum
+// is in an order fixed by this code (the dot products' 16 partial sums and the tree that adds them); half
+// precision's codes are widened to floats exactly. So every copy gives the same bits.
 
 #include <cstddef>
 #include <cstring>
@@ -22,8 +22,8 @@ namespace {
 typedef float Vec16 __attribute__((vector_size(64)));
 typedef float Vec8 __attribute__((vector_size(32)));
 typedef float Vec4 __attribute__((vector_size(16)));
-typedef std::uint16_t Code16 __attribute__((vector_size(32)));
-typedef std::uint32_t Bits16 __attribute__((vector_size(64)));
+typedef std::uint16_t Code4 __attribute__((vector_size(8)));
+typedef std::uint32_t Bits4 __attribute__((vector_size(16)));
 constexpr int kLanes = 16;
 constexpr int kBlock = 8;  // columns per pass over the rows below a block
 
@@ -47,6 +47,8 @@ inline void block_columns(const Entry* L, int j0, int nc, int ld, const Entry* (
 #if defined(__x86_64__) && defined(__GNUC__)
 #define OCTOCUT_KERNEL_TARGET __attribute__((target("avx512f")))
 namespace avx512 {
+using VecW = Vec16;
+constexpr int kSums = 8;  // backward's column sums per pass over the rows: 8 of the 32 registers
 #if !defined(__clang__)
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"  // GCC 12's _mm512_cvtph_ps starts from an undefined vector
@@ -66,12 +68,12 @@ OCTOCUT_VECTOR_HELPER OCTOCUT_KERNEL_TARGET Vec16 load_entries(const std::uint16
 
 #define OCTOCUT_KERNEL_TARGET __attribute__((target("avx2,f16c")))
 namespace avx2 {
-OCTOCUT_VECTOR_HELPER OCTOCUT_KERNEL_TARGET Vec16 load_entries(const std::uint16_t* p) {
-  const __m256 lo = _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
-  const __m256 hi = _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p + 8)));
-  Vec16 v;
-  std::memcpy(&v, &lo, sizeof lo);
-  std::memcpy(reinterpret_cast<char*>(&v) + sizeof lo, &hi, sizeof hi);
+using VecW = Vec8;
+constexpr int kSums = 4;  // 8 of the 16 registers
+OCTOCUT_VECTOR_HELPER OCTOCUT_KERNEL_TARGET Vec8 load_entries(const std::uint16_t* p) {
+  const __m256 f = _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
+  Vec8 v;
+  std::memcpy(&v, &f, sizeof v);
   return v;
 }
 #include "supernode_kernels_body.inc"
@@ -81,13 +83,15 @@ OCTOCUT_VECTOR_HELPER OCTOCUT_KERNEL_TARGET Vec16 load_entries(const std::uint16
 
 #define OCTOCUT_KERNEL_TARGET
 namespace generic {
-OCTOCUT_VECTOR_HELPER OCTOCUT_KERNEL_TARGET Vec16 load_entries(const std::uint16_t* p) {
-  Code16 c;
+using VecW = Vec4;
+constexpr int kSums = 2;  // 8 of SSE2's 16 registers
+OCTOCUT_VECTOR_HELPER OCTOCUT_KERNEL_TARGET Vec4 load_entries(const std::uint16_t* p) {
+  Code4 c;
   std::memcpy(&c, p, sizeof c);
-  const Bits16 u = __builtin_convertvector(c, Bits16);
-  const Bits16 magnitude = (u & 0x7fffu) << 13;
-  const Bits16 bits = ((magnitude + 0x38000000u) & Bits16(magnitude != 0u)) | ((u & 0x8000u) << 16);
-  Vec16 v;
+  const Bits4 u = __builtin_convertvector(c, Bits4);
+  const Bits4 magnitude = (u & 0x7fffu) << 13;
+  const Bits4 bits = ((magnitude + 0x38000000u) & Bits4(magnitude != 0u)) | ((u & 0x8000u) << 16);
+  Vec4 v;
   std::memcpy(&v, &bits, sizeof v);
   return v;
 }

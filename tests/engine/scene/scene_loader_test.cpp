@@ -292,21 +292,27 @@ TEST_F(SceneLoaderTest, OutOfRange) {
             path + ": /object/material/young_modulus: must be <= 1e+12, got 2e+12");
   EXPECT_EQ(error_of(write_scene("", R"("octree": {"base_level": 21})")),
             path + ": /object/octree/base_level: must be <= 20, got 21");
-  // Physical parameters far outside what any tissue, instrument or planet has: a clear error at load, not a run in
-  // which every step fails or a static solve returns displacements of 1e300 m.
-  EXPECT_EQ(error_of(write_scene("", R"("material": {"young_modulus": 1e-300})")),
-            path + ": /object/material/young_modulus: must be >= 1, got 1e-300");
-  EXPECT_EQ(error_of(write_scene("", R"("material": {"density": 1e300})")),
-            path + ": /object/material/density: must be <= 100000, got 1e+300");
-  EXPECT_EQ(error_of(write_scene("", R"("material": {"rayleigh_mass": 1e7})")),
-            path + ": /object/material/rayleigh_mass: must be <= 1e+06, got 1e+07");
-  EXPECT_EQ(error_of(write_scene("", R"("material": {"rayleigh_stiffness": 11})")),
-            path + ": /object/material/rayleigh_stiffness: must be <= 10, got 11");
-  EXPECT_EQ(error_of(write_scene(R"("solver": {"gravity": [0, 0, -2147483648]})")),
-            path + ": /solver/gravity/2: must be >= -10000, got -2147483648");
-  EXPECT_EQ(error_of(write_scene(R"("contact": {"friction": 1e300})")),
-            path + ": /contact/friction: must be <= 10, got 1e+300");
-  EXPECT_EQ(error_of(write_scene(R"("contact": {"damping": 2})")), path + ": /contact/damping: must be <= 1, got 2");
+}
+
+// Physical parameters far outside what any tissue, instrument or planet has: a clear error at load, not a run in which
+// every step fails or a static solve returns displacements of 1e300 m.
+TEST_F(SceneLoaderTest, PhysicalParametersOutOfRange) {
+  const std::string path = (m_dir / "scene.json").string();
+  struct Case {
+    const char* top;     // keys beside "object"
+    const char* object;  // keys of "object" beside "surface"
+    const char* error;   // after the path
+  };
+  const Case cases[] = {
+      {"", R"("material": {"young_modulus": 1e-300})", ": /object/material/young_modulus: must be >= 1, got 1e-300"},
+      {"", R"("material": {"density": 1e300})", ": /object/material/density: must be <= 100000, got 1e+300"},
+      {"", R"("material": {"rayleigh_mass": 1e7})", ": /object/material/rayleigh_mass: must be <= 1e+06, got 1e+07"},
+      {"", R"("material": {"rayleigh_stiffness": 11})", ": /object/material/rayleigh_stiffness: must be <= 10, got 11"},
+      {R"("solver": {"gravity": [0, 0, -2147483648]})", "", ": /solver/gravity/2: must be >= -10000, got -2147483648"},
+      {R"("contact": {"friction": 1e300})", "", ": /contact/friction: must be <= 10, got 1e+300"},
+      {R"("contact": {"damping": 2})", "", ": /contact/damping: must be <= 1, got 2"},
+  };
+  for (const Case& c : cases) EXPECT_EQ(error_of(write_scene(c.top, c.object)), path + c.error);
 }
 
 TEST_F(SceneLoaderTest, NonFiniteNumberFromOverride) {

@@ -62,4 +62,17 @@ void Executor::parallel_for(int n, int grain, const std::function<void(int, int)
   });
 }
 
+void Executor::parallel_for_each(int n, const std::function<void(int, int)>& body) {
+  if (n <= 0) return;
+  if (!m_impl || n < 2) {
+    body(0, n);
+    return;
+  }
+  m_impl->arena.execute([&] {
+    tbb::parallel_for(
+        tbb::blocked_range<int>(0, n, 1),
+        [&](const tbb::blocked_range<int>& r) { body(r.begin(), r.end()); }, tbb::simple_partitioner());
+  });
+}
+
 }  // namespace octocut::sim

@@ -662,7 +662,8 @@ void ContactWorld::Impl::query_sample(std::size_t ci, const QueryFrame& f, const
 //     Bullet's bounding box of the shape and not within the clearance known from their last query, in the collider's
 //     frame: cheap tests);
 //  2. the queries, in small chunks of kChunk samples of one collider (the samples near a tool are few and close
-//     together in S's order, and each query can cost tens of microseconds).
+//     together in S's order, and each query can cost tens of microseconds), each chunk handed to whichever thread is
+//     free (Executor::parallel_for_each): in equal shares one thread waited for the other's costly chunks.
 // Each (collider, sample) pair's cache entries are read and written by one chunk only, and Bullet's queries on a
 // shape are read-only. The chunks' contacts are joined in collider order, then sample order, so the result does not
 // depend on the threads.
@@ -719,7 +720,7 @@ std::vector<sim::Contact> ContactWorld::find(const sim::ContactSamples& samples,
     }
   };
   if (parallel && first[nc] > 1)
-    executor->parallel_for(first[nc], 1, run);
+    executor->parallel_for_each(first[nc], run);
   else
     run(0, first[nc]);
 

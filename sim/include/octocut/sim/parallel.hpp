@@ -15,6 +15,10 @@ class Executor {
   /// Calls body(begin, end) over disjoint chunks covering [0, n), in parallel. Each index is visited once; results
   /// written per index are deterministic whatever the thread count.
   void parallel_for(int n, int grain, const std::function<void(int, int)>& body);
+  /// The same for items whose costs differ widely (contact queries: a sample beside a tool costs tens of
+  /// microseconds, one far from it nothing): with more than one thread, body(k, k + 1) for each item, handed out one
+  /// at a time to whichever thread is free, instead of in one equal share per thread; with one, body(0, n).
+  void parallel_for_each(int n, const std::function<void(int, int)>& body);
 
  private:
   struct Impl;

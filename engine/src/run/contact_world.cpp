@@ -657,13 +657,14 @@ void ContactWorld::Impl::query_sample(std::size_t ci, const QueryFrame& f, const
 }
 
 // Two passes over the samples for all colliders at once, each on the executor's threads when given (two fork-joins
-// per step, not two per collider and one for the positions; meniscus_punch has four colliders):
+// per step, not two per collider and one for the positions; meniscus_punch has four colliders), each chunk handed to
+// whichever thread is free (Executor::parallel_for_each: in equal shares one thread waited for the other's costly
+// chunks, and the chunks near a collider cost far more than the others):
 //  1. in chunks of kScan samples: their positions, then for each collider the ones that need a query (inside
 //     Bullet's bounding box of the shape and not within the clearance known from their last query, in the collider's
 //     frame: cheap tests);
 //  2. the queries, in small chunks of kChunk samples of one collider (the samples near a tool are few and close
-//     together in S's order, and each query can cost tens of microseconds), each chunk handed to whichever thread is
-//     free (Executor::parallel_for_each): in equal shares one thread waited for the other's costly chunks.
+//     together in S's order, and each query can cost tens of microseconds).
 // Each (collider, sample) pair's cache entries are read and written by one chunk only, and Bullet's queries on a
 // shape are read-only. The chunks' contacts are joined in collider order, then sample order, so the result does not
 // depend on the threads.
@@ -694,7 +695,7 @@ std::vector<sim::Contact> ContactWorld::find(const sim::ContactSamples& samples,
     }
   };
   if (parallel && scans > 1)
-    executor->parallel_for(scans, 1, place_and_scan);
+    executor->parallel_for_each(scans, place_and_scan);
   else
     place_and_scan(0, scans);
 

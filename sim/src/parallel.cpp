@@ -48,31 +48,34 @@ void serial_openmp_here() {
 
 Executor::~Executor() = default;
 
-void Executor::parallel_for(int n, int grain, const std::function<void(int, int)>& body) {
+namespace {
+
+// body over [0, n) in the arena, in TBB ranges of at least `grain` items split as `partitioner` says; serial below
+// two grains or without an arena (one thread): no scheduling overhead at all.
+template <class Partitioner>
+void run_loop(tbb::task_arena* arena, int n, int grain, const std::function<void(int, int)>& body,
+              Partitioner partitioner) {
   if (n <= 0) return;
-  // Serial below two grains or with one thread: no scheduling overhead at all.
-  if (!m_impl || n < 2 * std::max(1, grain)) {
+  grain = std::max(1, grain);
+  if (arena == nullptr || n < 2 * grain) {
     body(0, n);
     return;
   }
-  m_impl->arena.execute([&] {
+  arena->execute([&] {
     tbb::parallel_for(
-        tbb::blocked_range<int>(0, n, std::size_t(std::max(1, grain))),
-        [&](const tbb::blocked_range<int>& r) { body(r.begin(), r.end()); }, tbb::static_partitioner());
+        tbb::blocked_range<int>(0, n, std::size_t(grain)),
+        [&](const tbb::blocked_range<int>& r) { body(r.begin(), r.end()); }, partitioner);
   });
 }
 
+}  // namespace
+
+void Executor::parallel_for(int n, int grain, const std::function<void(int, int)>& body) {
+  run_loop(m_impl ? &m_impl->arena : nullptr, n, grain, body, tbb::static_partitioner());
+}
+
 void Executor::parallel_for_each(int n, const std::function<void(int, int)>& body) {
-  if (n <= 0) return;
-  if (!m_impl || n < 2) {
-    body(0, n);
-    return;
-  }
-  m_impl->arena.execute([&] {
-    tbb::parallel_for(
-        tbb::blocked_range<int>(0, n, 1),
-        [&](const tbb::blocked_range<int>& r) { body(r.begin(), r.end()); }, tbb::simple_partitioner());
-  });
+  run_loop(m_impl ? &m_impl->arena : nullptr, n, 1, body, tbb::simple_partitioner());
 }
 
 }  // namespace octocut::sim

@@ -43,7 +43,7 @@ TEST(Executor, ParallelForEachHandsOutEveryItemOnceAndOneAtATimeOnTwoThreads) {
   }
 }
 
-TEST(Executor, ParallelForCoversTheRangeOnceInChunksOfAtLeastTheGrain) {
+TEST(Executor, ParallelForCoversTheRangeOnce) {
   for (const int threads : {1, 2}) {
     Executor executor(threads);
     for (const int n : {0, 1, 5, 64, 1001}) {
